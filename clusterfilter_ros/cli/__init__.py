@@ -1,0 +1,62 @@
+"""The ``clusterfilter`` command.
+
+Each subcommand lives in its own module in this package and exposes
+``register(subparsers)``, which adds its parser and sets ``func`` (a callable taking
+the parsed ``argparse.Namespace`` and returning an exit code). Modules import heavy
+dependencies (rclpy, matplotlib, rosbags) inside ``func`` so ``--help`` stays fast.
+
+Errors meant for the user (:class:`~clusterfilter_ros.errors.ClusterfilterError`)
+print one line and exit with code 2; ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from clusterfilter_ros import __version__
+from clusterfilter_ros.errors import ClusterfilterError
+
+#: Subcommand modules, in the order ``--help`` lists them.
+COMMAND_MODULES = [
+    "params",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="clusterfilter",
+        description="Training-free drone detection in Livox lidar point clouds.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    parser.add_argument(
+        "--debug", action="store_true", help="show full tracebacks instead of one-line errors"
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"{__name__}.{name}").register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except ClusterfilterError as exc:
+        if args.debug:
+            raise
+        print(f"clusterfilter {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"clusterfilter {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

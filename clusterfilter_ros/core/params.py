@@ -1,0 +1,251 @@
+"""One definition of every tunable parameter: name, type, default, range, description.
+
+The same :class:`ParamSpec` objects drive
+- the ROS node (``declare_parameter`` with descriptors and ranges, run-time validation),
+- ``config/detector.yaml`` (generated from them; a test keeps the file in sync),
+- the CLI (``--param name=value`` and ``--params-file``),
+- the README parameter table (``clusterfilter params --markdown``).
+
+Detector (core) parameters are listed in :data:`DETECTOR_PARAMS`; node-only parameters
+(topics, frames, extrinsics) live in ``clusterfilter_ros.ros.node_params`` using the same
+class. This module is ROS-free.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from clusterfilter_ros.errors import ParameterError
+
+ParamValue = bool | int | float | str | list[float] | list[str]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """Definition of one parameter.
+
+    ``kind`` is one of ``bool``, ``int``, ``float``, ``str``, ``float_list``, ``str_list``.
+    ``minimum``/``maximum`` bound numbers (and every element of a float list);
+    ``length`` fixes the length of a list; ``choices`` restricts strings.
+    """
+
+    name: str
+    kind: str
+    default: ParamValue
+    description: str
+    minimum: float | None = None
+    maximum: float | None = None
+    choices: tuple[str, ...] | None = None
+    length: int | None = None
+    group: str = "detector"
+    read_only: bool = False
+
+    def validate(self, value: Any) -> ParamValue:
+        """Return ``value`` coerced to this parameter's type, or raise :class:`ParameterError`."""
+        try:
+            coerced = _coerce(self.kind, value)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(
+                f"parameter '{self.name}' expects {self.kind}, got {value!r} ({exc})"
+            ) from None
+        items = coerced if isinstance(coerced, list) else [coerced]
+        if self.length is not None and isinstance(coerced, list) and len(coerced) != self.length:
+            raise ParameterError(
+                f"parameter '{self.name}' needs {self.length} values, got {len(coerced)}"
+            )
+        for item in items:
+            if isinstance(item, float) and not math.isfinite(item):
+                raise ParameterError(f"parameter '{self.name}' must be finite, got {item!r}")
+            if isinstance(item, (int, float)) and not isinstance(item, bool):
+                if self.minimum is not None and item < self.minimum:
+                    raise ParameterError(
+                        f"parameter '{self.name}' = {item} is below its minimum {self.minimum}"
+                    )
+                if self.maximum is not None and item > self.maximum:
+                    raise ParameterError(
+                        f"parameter '{self.name}' = {item} is above its maximum {self.maximum}"
+                    )
+        if self.choices is not None and coerced not in self.choices:
+            raise ParameterError(
+                f"parameter '{self.name}' = {coerced!r} is not one of {list(self.choices)}"
+            )
+        return coerced
+
+    def range_text(self) -> str:
+        if self.choices:
+            return " | ".join(self.choices)
+        if self.minimum is None and self.maximum is None:
+            return ""
+        lo = "" if self.minimum is None else _fmt(self.minimum)
+        hi = "" if self.maximum is None else _fmt(self.maximum)
+        return f"[{lo}, {hi}]"
+
+
+def _fmt(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
+
+
+def _coerce(kind: str, value: Any) -> ParamValue:
+    if kind == "bool":
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.lower() in ("true", "false", "1", "0"):
+            return value.lower() in ("true", "1")
+        if isinstance(value, int) and value in (0, 1):
+            return bool(value)
+        raise ValueError("not a boolean")
+    if kind == "int":
+        if isinstance(value, bool):
+            raise ValueError("boolean given")
+        if isinstance(value, float) and not value.is_integer():
+            raise ValueError("not a whole number")
+        return int(value)
+    if kind == "float":
+        if isinstance(value, bool):
+            raise ValueError("boolean given")
+        return float(value)
+    if kind == "str":
+        if not isinstance(value, str):
+            raise ValueError("not a string")
+        return value
+    if kind == "float_list":
+        if isinstance(value, str):
+            value = [v for v in value.replace("[", "").replace("]", "").split(",") if v.strip()]
+        return [float(_coerce("float", v)) for v in value]
+    if kind == "str_list":
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",") if v.strip()]
+        return [str(v) for v in value]
+    raise ValueError(f"unknown parameter kind {kind}")
+
+
+class ParamSet:
+    """Validated values for a list of :class:`ParamSpec`, accessible as attributes."""
+
+    def __init__(self, specs: Iterable[ParamSpec], values: Mapping[str, Any] | None = None):
+        object.__setattr__(self, "_specs", {s.name: s for s in specs})
+        object.__setattr__(self, "_values", {n: s.default for n, s in self._specs.items()})
+        if values:
+            self.update(values)
+
+    @property
+    def specs(self) -> dict[str, ParamSpec]:
+        return dict(self._specs)
+
+    def update(self, values: Mapping[str, Any]) -> None:
+        """Validate and set several values at once; nothing changes if any is invalid."""
+        staged = dict(self._values)
+        for name, value in values.items():
+            if name not in self._specs:
+                raise ParameterError(f"unknown parameter '{name}'")
+            staged[name] = self._specs[name].validate(value)
+        object.__setattr__(self, "_values", staged)
+
+    def as_dict(self) -> dict[str, ParamValue]:
+        return {k: (list(v) if isinstance(v, list) else v) for k, v in self._values.items()}
+
+    def copy(self, **overrides: Any) -> ParamSet:
+        new = type(self)(self._specs.values(), self._values)
+        if overrides:
+            new.update(overrides)
+        return new
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self._values[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        self.update({name: value})
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self._values})"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ParamSet) and self._values == other._values
+
+
+def parse_assignments(items: Iterable[str]) -> dict[str, str]:
+    """Parse CLI ``name=value`` strings (values are validated later by the ParamSpec)."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            raise ParameterError(f"expected name=value, got '{item}'")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def markdown_table(specs: Iterable[ParamSpec]) -> str:
+    """A Markdown table of parameters for the README."""
+    rows = ["| name | type | default | range | description |", "|---|---|---|---|---|"]
+    for s in specs:
+        rows.append(
+            f"| `{s.name}` | {s.kind} | `{s.default}` | {s.range_text()} | {s.description} |"
+        )
+    return "\n".join(rows)
+
+
+__all__ = [
+    "ParamSpec",
+    "ParamSet",
+    "ParamValue",
+    "parse_assignments",
+    "markdown_table",
+]
+
+
+def detector_param_specs() -> list[ParamSpec]:
+    """The detector (core algorithm) parameters; see :data:`DETECTOR_PARAMS`."""
+    return list(DETECTOR_PARAMS)
+
+
+#: Parameters of the detection algorithm (offline and streaming). The core owns this
+#: list; defaults follow the paper's published code where it has one.
+DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
+    ParamSpec(
+        "mid360_min_z",
+        "float",
+        3.5,
+        "Mid360 points at or below this height (m, output frame) are dropped as ground clutter.",
+        minimum=-50.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "eps",
+        "float",
+        2.0,
+        "Neighbourhood radius (m) of the density clustering of the global cloud.",
+        minimum=0.05,
+        maximum=20.0,
+    ),
+    ParamSpec(
+        "min_samples",
+        "int",
+        10,
+        "Points within eps that make a point a core point of a cluster.",
+        minimum=1,
+        maximum=10000,
+    ),
+    ParamSpec(
+        "voxel_size",
+        "float",
+        0.2,
+        "Edge (m) of the voxels used for occupied volume, density and IoU.",
+        minimum=0.01,
+        maximum=5.0,
+    ),
+    ParamSpec(
+        "target_offset",
+        "float_list",
+        [0.0, 0.0, 0.0],
+        "Offset (x, y, z in m) added to every estimate, e.g. to a prism mounted on the drone.",
+        minimum=-10.0,
+        maximum=10.0,
+        length=3,
+    ),
+)
