@@ -13,16 +13,23 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import pkgutil
 import sys
 from collections.abc import Sequence
 
 from clusterfilter_ros import __version__
 from clusterfilter_ros.errors import ClusterfilterError
 
-#: Subcommand modules, in the order ``--help`` lists them.
-COMMAND_MODULES = [
-    "params",
-]
+#: Subcommands listed first in ``--help``; any other module of this package that has
+#: ``register`` follows in alphabetical order (modules are discovered, not registered).
+PREFERRED_ORDER = ["detect", "evaluate", "simulate", "replay", "detector", "demo"]
+
+
+def command_modules() -> list[str]:
+    names = [m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_")]
+    return sorted(
+        names, key=lambda n: (PREFERRED_ORDER.index(n) if n in PREFERRED_ORDER else 99, n)
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -35,8 +42,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--debug", action="store_true", help="show full tracebacks instead of one-line errors"
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
-        importlib.import_module(f"{__name__}.{name}").register(subparsers)
+    for name in command_modules():
+        module = importlib.import_module(f"{__name__}.{name}")
+        if hasattr(module, "register"):
+            module.register(subparsers)
     return parser
 
 
