@@ -1,0 +1,278 @@
+"""A straightforward reference implementation of the cluster-filter paper (the baseline).
+
+This is what a first, literal reading of the paper's sections 3.1-3.4 gives, written with
+scikit-learn DBSCAN on *all* accumulated points, the way the authors' offline code works.
+It lives in ``benchmarks/`` only: the benchmarks run it on the same simulated sequences
+as the product, in the same process, to report a speed ratio and an accuracy comparison.
+It is deliberately plain numpy (no tricks), but not deliberately slow.
+
+Pipeline (defaults are the authors' published ones, see REFERENCE section 1):
+
+1. Avia denoise (3.1): superimpose every Avia point of the sequence and run
+   ``DBSCAN(eps=2.0, min_samples=10)``; points labelled noise are dropped.
+2. Mid360 ground cut: keep points with ``z > 3.5`` m.
+3. Global clusterer (3.2): ``DBSCAN(eps=2.0, min_samples=10)`` on every remaining point
+   of both lidars over the whole sequence.
+4. Candidate gates: a global cluster is a candidate if it has 100..10,000 points, its
+   centroid is at ``z >= 6`` m and its occupied 0.2 m voxels cover at least 0.3 m^3.
+5. Local clusterer (3.2): a "frame" is one lidar period (0.1 s) of both lidars; for
+   window lengths ``frames`` in (2, 5, 10), the windows starting at every frame take the
+   global cluster's points in that time span (no re-clustering). Density = points /
+   occupied voxel volume; relative density ``R = rho_local / rho_global``; IoU of the
+   occupied 0.2 m voxel sets of consecutive windows.
+6. Score (3.3): ``Score = sum exp(R) + lambda * sum log(1/IoU)`` summed over every
+   non-empty window (and consecutive non-empty pair) of every window length; IoU is
+   clipped to ``[iou_floor, 1]`` so a disjoint pair scores a finite ``log(1/iou_floor)``.
+   The best-scoring candidate is the drone.
+7. Trajectory (3.4): the selected points, ordered by time, are grouped per frame
+   (centroid, weight = point count); a cubic smoothing B-spline per axis
+   (``scipy.interpolate.splrep``, k=3) through them is evaluated at the requested
+   stamps inside the time span the points cover (no estimate outside it).
+
+Choices the paper leaves open are written down here: the frame = 0.1 s slot of both
+lidars; per-point times (``Frame.point_time``) are used when the frames carry them;
+lambda = 1; the smoothing factor of the spline is the number of frames with points
+times ``spline_sigma**2``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import splev, splrep
+from sklearn.cluster import DBSCAN
+
+from clusterfilter_ros.core.frame import AVIA, MID360, Frame, TimedPositions
+
+
+@dataclass(frozen=True)
+class ReferenceParams:
+    """Parameters of the reference implementation (the authors' defaults)."""
+
+    avia_eps: float = 2.0
+    avia_min_samples: int = 10
+    mid360_min_z: float = 3.5
+    eps: float = 2.0
+    min_samples: int = 10
+    min_cluster_points: int = 100
+    max_cluster_points: int = 10_000
+    min_centroid_z: float = 6.0
+    min_occupied_volume: float = 0.3
+    voxel_size: float = 0.2
+    window_lengths: tuple[int, ...] = (2, 5, 10)
+    score_lambda: float = 1.0
+    iou_floor: float = 1e-3
+    frame_period: float = 0.1
+    spline_sigma: float = 0.3
+    target_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass
+class ReferenceResult:
+    """What the reference run produced.
+
+    Attributes:
+        estimate: positions at the requested stamps where the spline covers them.
+        drone_xyz: (K, 3) points of the selected cluster.
+        drone_time: (K,) times of those points (s).
+        n_points_clustered: size of the global cloud given to DBSCAN.
+        n_candidates: global clusters that passed the gates.
+        scores: score of each candidate (same order as the candidates).
+        timings: wall seconds per stage.
+    """
+
+    estimate: TimedPositions
+    drone_xyz: np.ndarray
+    drone_time: np.ndarray
+    n_points_clustered: int
+    n_candidates: int
+    scores: list[float] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _frame_points(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray]:
+    """Stack frames into (N,3) xyz and (N,) absolute point times."""
+    if not frames:
+        return np.empty((0, 3), np.float64), np.empty(0, np.float64)
+    xyz = np.concatenate([f.xyz for f in frames]).astype(np.float64)
+    times = np.concatenate(
+        [f.stamp + (f.point_time if f.point_time is not None else np.zeros(len(f))) for f in frames]
+    )
+    return xyz, times
+
+
+def _voxel_keys(xyz: np.ndarray, voxel_size: float) -> np.ndarray:
+    """Unique occupied voxel keys (one int64 per voxel) of a point set."""
+    ijk = np.floor(xyz / voxel_size).astype(np.int64) + (1 << 20)
+    keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+    return np.unique(keys)
+
+
+def denoise_avia(xyz: np.ndarray, params: ReferenceParams) -> np.ndarray:
+    """Boolean mask of superimposed Avia points that DBSCAN does not call noise."""
+    if len(xyz) == 0:
+        return np.zeros(0, dtype=bool)
+    labels = DBSCAN(eps=params.avia_eps, min_samples=params.avia_min_samples).fit_predict(xyz)
+    return labels >= 0
+
+
+def score_cluster(
+    xyz: np.ndarray, frame_index: np.ndarray, n_frames: int, params: ReferenceParams
+) -> float:
+    """The paper's score of one global cluster: sum exp(R) + lambda * sum log(1/IoU)."""
+    voxel_volume = params.voxel_size**3
+    global_density = len(xyz) / (len(_voxel_keys(xyz, params.voxel_size)) * voxel_volume)
+    order = np.argsort(frame_index, kind="stable")
+    xyz, frame_index = xyz[order], frame_index[order]
+    score_density = 0.0
+    score_iou = 0.0
+    for length in params.window_lengths:
+        previous_keys: np.ndarray | None = None
+        for start in range(0, max(n_frames - length, 0) + 1):
+            lo, hi = np.searchsorted(frame_index, [start, start + length])
+            if hi <= lo:
+                previous_keys = None
+                continue
+            keys = _voxel_keys(xyz[lo:hi], params.voxel_size)
+            local_density = (hi - lo) / (len(keys) * voxel_volume)
+            score_density += float(np.exp(local_density / global_density))
+            if previous_keys is not None:
+                inter = len(np.intersect1d(previous_keys, keys, assume_unique=True))
+                union = len(previous_keys) + len(keys) - inter
+                iou = min(max(inter / union, params.iou_floor), 1.0)
+                score_iou += float(np.log(1.0 / iou))
+            previous_keys = keys
+    return score_density + params.score_lambda * score_iou
+
+
+def fit_trajectory(
+    xyz: np.ndarray,
+    times: np.ndarray,
+    frame_index: np.ndarray,
+    stamps: np.ndarray,
+    params: ReferenceParams,
+) -> TimedPositions:
+    """Cubic smoothing B-spline through per-frame centroids, evaluated at ``stamps``."""
+    stamps = np.asarray(stamps, dtype=np.float64)
+    empty = TimedPositions(np.empty(0), np.empty((0, 3)))
+    if len(xyz) == 0 or len(stamps) == 0:
+        return empty
+    uniq, inverse, counts = np.unique(frame_index, return_inverse=True, return_counts=True)
+    centroid = np.zeros((len(uniq), 3))
+    np.add.at(centroid, inverse, xyz)
+    centroid /= counts[:, None]
+    t = np.bincount(inverse, weights=times) / counts
+    order = np.argsort(t)
+    t, centroid, counts = t[order], centroid[order], counts[order]
+    inside = (stamps >= t[0]) & (stamps <= t[-1])
+    if not inside.any():
+        return empty
+    query = stamps[inside]
+    if len(t) < 4:
+        out = np.stack([np.interp(query, t, centroid[:, a]) for a in range(3)], axis=1)
+    else:
+        weights = np.sqrt(counts) / params.spline_sigma
+        out = np.stack(
+            [
+                splev(query, splrep(t, centroid[:, a], w=weights, k=3, s=float(len(t))))
+                for a in range(3)
+            ],
+            axis=1,
+        )
+    return TimedPositions(query, out + np.asarray(params.target_offset, dtype=np.float64))
+
+
+def reference_detect(
+    frames: list[Frame],
+    stamps: np.ndarray | None = None,
+    params: ReferenceParams | None = None,
+) -> ReferenceResult:
+    """Run the reference pipeline on a whole sequence.
+
+    ``stamps`` are the times to estimate at (default: every frame stamp). Returns the
+    estimates, the selected drone points and per-stage timings.
+    """
+    import time
+
+    params = params or ReferenceParams()
+    timings: dict[str, float] = {}
+    frames = sorted(frames, key=lambda f: f.stamp)
+    if stamps is None:
+        stamps = np.unique([f.stamp for f in frames])
+    empty = ReferenceResult(
+        TimedPositions(np.empty(0), np.empty((0, 3))), np.empty((0, 3)), np.empty(0), 0, 0
+    )
+    if not frames:
+        return empty
+    t0 = frames[0].stamp
+
+    tic = time.perf_counter()
+    avia_xyz, avia_t = _frame_points([f for f in frames if f.sensor == AVIA])
+    keep = denoise_avia(avia_xyz, params)
+    avia_xyz, avia_t = avia_xyz[keep], avia_t[keep]
+    timings["avia_denoise"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    mid_xyz, mid_t = _frame_points([f for f in frames if f.sensor == MID360])
+    above = mid_xyz[:, 2] > params.mid360_min_z
+    mid_xyz, mid_t = mid_xyz[above], mid_t[above]
+    other = [f for f in frames if f.sensor not in (AVIA, MID360)]
+    other_xyz, other_t = _frame_points(other)
+    xyz = np.concatenate([avia_xyz, mid_xyz, other_xyz])
+    times = np.concatenate([avia_t, mid_t, other_t])
+    frame_stamp_index = np.floor((times - t0) / params.frame_period).astype(np.int64)
+    frame_stamp_index = np.maximum(frame_stamp_index, 0)
+    n_frames = int(frame_stamp_index.max()) + 1 if len(times) else 0
+    timings["merge"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    if len(xyz) == 0:
+        return empty
+    labels = DBSCAN(eps=params.eps, min_samples=params.min_samples).fit_predict(xyz)
+    timings["global_dbscan"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    order = np.argsort(labels, kind="stable")
+    sorted_labels = labels[order]
+    cluster_ids, starts, sizes = np.unique(sorted_labels, return_index=True, return_counts=True)
+    candidates: list[np.ndarray] = []
+    min_voxels = params.min_occupied_volume / params.voxel_size**3
+    for cid, start, size in zip(cluster_ids, starts, sizes, strict=True):
+        if cid < 0 or not params.min_cluster_points <= size <= params.max_cluster_points:
+            continue
+        members = order[start : start + size]
+        if xyz[members, 2].mean() < params.min_centroid_z:
+            continue
+        if len(_voxel_keys(xyz[members], params.voxel_size)) < min_voxels - 1e-9:
+            continue
+        candidates.append(members)
+    timings["gates"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    scores = [score_cluster(xyz[m], frame_stamp_index[m], n_frames, params) for m in candidates]
+    timings["local_scoring"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    if not candidates:
+        timings["spline"] = 0.0
+        return ReferenceResult(
+            TimedPositions(np.empty(0), np.empty((0, 3))),
+            np.empty((0, 3)),
+            np.empty(0),
+            len(xyz),
+            0,
+            [],
+            timings,
+        )
+    best = candidates[int(np.argmax(scores))]
+    estimate = fit_trajectory(
+        xyz[best], times[best], frame_stamp_index[best], np.asarray(stamps), params
+    )
+    timings["spline"] = time.perf_counter() - tic
+    return ReferenceResult(
+        estimate, xyz[best], times[best], len(xyz), len(candidates), scores, timings
+    )
+
+
+__all__ = ["ReferenceParams", "ReferenceResult", "reference_detect", "score_cluster"]
