@@ -1,0 +1,111 @@
+"""Write files and folders so readers never see a half-written result.
+
+Everything is first written to a temporary sibling (same directory, hence same file
+system) and then moved into place with :func:`os.replace` / :func:`os.rename`, which is
+atomic on POSIX. If writing fails, the temporary is removed and any previous file at the
+destination is left untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from clusterfilter_ros.errors import InputError
+
+
+def _ensure_parent(path: Path) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create folder {path.parent}: {exc.strerror or exc}") from exc
+
+
+@contextlib.contextmanager
+def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
+    """Yield a temporary file path next to ``path``; on success move it onto ``path``.
+
+    The caller writes the complete file to the yielded path (by any means: ``np.save``,
+    ``open``, a library writer). When the ``with`` block exits normally the file replaces
+    ``path`` atomically; on an exception it is deleted and ``path`` is unchanged.
+    ``suffix`` is appended to the temporary name (some writers insist on an extension).
+    """
+    target = Path(path)
+    _ensure_parent(target)
+    fd, tmp_name = tempfile.mkstemp(
+        prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent
+    )
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically (temporary file + :func:`os.replace`)."""
+    target = Path(path)
+    with atomic_output_path(target) as tmp:
+        tmp.write_text(text, encoding=encoding)
+    return target
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file + :func:`os.replace`)."""
+    target = Path(path)
+    with atomic_output_path(target) as tmp:
+        tmp.write_bytes(data)
+    return target
+
+
+@contextlib.contextmanager
+def atomic_output_dir(
+    path: str | os.PathLike[str], overwrite: bool = False, create: bool = True
+) -> Iterator[Path]:
+    """Yield a temporary folder path next to ``path``; on success rename it to ``path``.
+
+    With ``create`` the temporary folder exists when yielded; without it only its name is
+    reserved (for writers such as rosbags' that refuse an existing folder). An existing
+    non-empty ``path`` is an :class:`InputError` unless ``overwrite`` is true, in which
+    case it is replaced (moved aside first, deleted after the new folder is in place).
+    """
+    target = Path(path)
+    if target.exists() and not overwrite:
+        if not target.is_dir() or any(target.iterdir()):
+            raise InputError(f"output {target} already exists (choose another path or remove it)")
+    _ensure_parent(target)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+    if not create:
+        tmp.rmdir()
+    try:
+        yield tmp
+        if target.exists():
+            if target.is_dir() and not any(target.iterdir()):
+                target.rmdir()
+            else:
+                old = Path(
+                    tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent)
+                )
+                old.rmdir()
+                os.rename(target, old)
+                os.rename(tmp, target)
+                if old.is_dir():
+                    shutil.rmtree(old, ignore_errors=True)
+                else:
+                    old.unlink(missing_ok=True)
+                return
+        os.rename(tmp, target)
+    except BaseException:
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
+        elif tmp.exists():
+            tmp.unlink(missing_ok=True)
+        raise

@@ -1,0 +1,287 @@
+"""MMAUD / UG2+ challenge sequence folders.
+
+Layout (other sub-folders such as ``Image/`` or ``radar_enhance_pcl/`` are ignored)::
+
+    seqN/lidar_360/<stamp>.npy     (N, 3) float64 xyz, zero-padded  -> sensor "mid360"
+    seqN/livox_avia/<stamp>.npy    (N, 3) float64 xyz, zero-padded  -> sensor "avia"
+    seqN/ground_truth/<stamp>.npy  (3,)   float64 xyz (training sequences only)
+
+A file name is the time in seconds (``1706255621.600227``; some names lost trailing
+zeros, ``1706255621.6``). All-zero rows are padding; rows with NaN/Inf are dropped too.
+"""
+
+from __future__ import annotations
+
+import heapq
+import os
+import re
+from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Sequence as SequenceABC
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from clusterfilter_ros.core.frame import AVIA, MID360, Frame, Sequence, TimedPositions
+from clusterfilter_ros.errors import InputError
+from clusterfilter_ros.io.atomic import atomic_output_dir
+
+#: Challenge sub-folder name -> canonical sensor name.
+SENSOR_FOLDERS: dict[str, str] = {"lidar_360": MID360, "livox_avia": AVIA}
+#: Canonical sensor name -> challenge sub-folder name.
+FOLDER_OF_SENSOR: dict[str, str] = {v: k for k, v in SENSOR_FOLDERS.items()}
+GROUND_TRUTH_FOLDER = "ground_truth"
+#: Rows per file in the real data (Mid360 files alternate between the two sizes).
+REAL_PAD_ROWS: dict[str, list[int]] = {MID360: [19968, 20064], AVIA: [24000]}
+
+_STAMP_RE = re.compile(r"^\d+(\.\d*)?$")
+
+
+@dataclass(frozen=True)
+class StampedFile:
+    """One ``<stamp>.npy`` file of a sequence folder."""
+
+    stamp: float
+    sensor: str
+    path: Path
+
+
+def parse_stamp(path: Path) -> float:
+    """Seconds from a challenge file name (``1706255621.6.npy`` -> 1706255621.6)."""
+    stem = path.name[: -len(".npy")] if path.name.endswith(".npy") else path.stem
+    if not _STAMP_RE.match(stem):
+        raise InputError(
+            f"{path}: file name is not a timestamp in seconds (like 1706255621.600227.npy)"
+        )
+    return float(stem)
+
+
+def format_stamp(stamp: float) -> str:
+    """File-name form of a stamp, six decimals like the real data (``1706255621.600227``)."""
+    if not np.isfinite(stamp) or stamp < 0:
+        raise InputError(f"cannot name a file after stamp {stamp!r} (need a finite time >= 0)")
+    return f"{stamp:.6f}"
+
+
+def _natural_key(name: str) -> list[object]:
+    return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
+
+
+def is_sequence_folder(path: str | os.PathLike[str]) -> bool:
+    """True if ``path`` is a folder with a ``lidar_360`` or ``livox_avia`` sub-folder."""
+    p = Path(path)
+    return p.is_dir() and any((p / name).is_dir() for name in SENSOR_FOLDERS)
+
+
+def list_sequence_folders(root: str | os.PathLike[str]) -> list[Path]:
+    """Sequence folders under ``root``: ``[root]`` if it is one, else its sequence children.
+
+    Children are sorted naturally (``seq2`` before ``seq10``). Raises :class:`InputError`
+    if ``root`` is missing or holds no sequence folder.
+    """
+    p = Path(root)
+    if not p.exists():
+        raise InputError(f"{p}: no such folder")
+    if not p.is_dir():
+        raise InputError(f"{p}: not a folder (expected a challenge sequence folder)")
+    if is_sequence_folder(p):
+        return [p]
+    children = [c for c in p.iterdir() if is_sequence_folder(c)]
+    if not children:
+        raise InputError(
+            f"{p}: not a challenge sequence folder (no lidar_360/ or livox_avia/ inside) "
+            "and no sequence folders below it"
+        )
+    return sorted(children, key=lambda c: _natural_key(c.name))
+
+
+def _check_sensors(sensors: Iterable[str] | None) -> set[str]:
+    if sensors is None:
+        return set(FOLDER_OF_SENSOR)
+    wanted = {sensors} if isinstance(sensors, str) else set(sensors)
+    unknown = wanted - set(FOLDER_OF_SENSOR)
+    if unknown:
+        raise InputError(
+            f"unknown sensor(s) {', '.join(sorted(unknown))}; "
+            f"challenge folders hold {', '.join(sorted(FOLDER_OF_SENSOR))}"
+        )
+    return wanted
+
+
+def _require_sequence_folder(path: str | os.PathLike[str]) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such folder")
+    if not p.is_dir():
+        raise InputError(f"{p}: not a folder (expected a challenge sequence folder)")
+    if not is_sequence_folder(p):
+        raise InputError(
+            f"{p}: no lidar_360/ or livox_avia/ folder inside (not a challenge sequence)"
+        )
+    return p
+
+
+def _npy_files(folder: Path) -> list[Path]:
+    try:
+        entries = list(os.scandir(folder))
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot list folder: {exc.strerror or exc}") from exc
+    return [Path(e.path) for e in entries if e.name.endswith(".npy") and e.is_file()]
+
+
+def list_lidar_files(
+    path: str | os.PathLike[str], sensors: Iterable[str] | None = None
+) -> list[StampedFile]:
+    """The lidar files of a sequence folder, ordered by stamp then sensor name."""
+    p = _require_sequence_folder(path)
+    wanted = _check_sensors(sensors)
+    files: list[StampedFile] = []
+    for folder_name, sensor in SENSOR_FOLDERS.items():
+        folder = p / folder_name
+        if sensor not in wanted or not folder.is_dir():
+            continue
+        files.extend(StampedFile(parse_stamp(f), sensor, f) for f in _npy_files(folder))
+    files.sort(key=lambda f: (f.stamp, f.sensor))
+    return files
+
+
+def load_npy(path: Path) -> np.ndarray:
+    """``np.load`` with every failure turned into a one-line :class:`InputError`."""
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"{path}: not a readable .npy file ({msg})") from exc
+    if not isinstance(arr, np.ndarray):
+        raise InputError(f"{path}: expected one array, found {type(arr).__name__}")
+    return arr
+
+
+def valid_rows(xyz: np.ndarray) -> np.ndarray:
+    """Boolean mask of rows that are real points: not all-zero padding and all finite."""
+    return np.isfinite(xyz).all(axis=1) & (xyz != 0).any(axis=1)
+
+
+def load_lidar_file(path: Path, sensor: str, stamp: float | None = None) -> Frame:
+    """One challenge lidar file as a :class:`Frame` (padding and non-finite rows dropped)."""
+    arr = load_npy(path)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise InputError(f"{path}: expected an (N, 3) array of xyz, found shape {arr.shape}")
+    if arr.dtype.kind not in "fiu":
+        raise InputError(f"{path}: expected numbers, found dtype {arr.dtype}")
+    xyz = arr[valid_rows(arr)]
+    return Frame(
+        stamp=parse_stamp(path) if stamp is None else stamp,
+        sensor=sensor,
+        xyz=xyz.astype(np.float32),
+    )
+
+
+def iter_frames_folder(
+    path: str | os.PathLike[str], sensors: Iterable[str] | None = None
+) -> Iterator[Frame]:
+    """Frames of a sequence folder in time order (stamp, then sensor name), loaded lazily."""
+    for f in list_lidar_files(path, sensors):
+        yield load_lidar_file(f.path, f.sensor, f.stamp)
+
+
+def read_ground_truth_folder(folder: str | os.PathLike[str]) -> TimedPositions:
+    """Positions from a challenge ``ground_truth/`` folder of ``<stamp>.npy`` (3,) files."""
+    p = Path(folder)
+    if not p.is_dir():
+        raise InputError(f"{p}: no such ground-truth folder")
+    files = _npy_files(p)
+    stamps = np.array([parse_stamp(f) for f in files], dtype=np.float64)
+    xyz = np.empty((len(files), 3), dtype=np.float64)
+    for i, f in enumerate(files):
+        arr = load_npy(f)
+        if arr.size != 3 or arr.dtype.kind not in "fiu":
+            raise InputError(
+                f"{f}: expected 3 numbers (x, y, z), found shape {arr.shape} {arr.dtype}"
+            )
+        xyz[i] = arr.reshape(3)
+    finite = np.isfinite(xyz).all(axis=1)
+    return TimedPositions(stamps[finite], xyz[finite])
+
+
+def read_sequence_folder(
+    path: str | os.PathLike[str], sensors: Iterable[str] | None = None
+) -> Sequence:
+    """A whole sequence folder: lidar frames in time order plus ground truth if present."""
+    p = _require_sequence_folder(path)
+    frames = list(iter_frames_folder(p, sensors))
+    gt_dir = p / GROUND_TRUTH_FOLDER
+    ground_truth = read_ground_truth_folder(gt_dir) if gt_dir.is_dir() else None
+    return Sequence(name=p.name, frames=frames, ground_truth=ground_truth)
+
+
+def _pad_sizes(pad: int | SequenceABC[int] | None) -> list[int] | None:
+    if pad is None:
+        return None
+    sizes = [int(pad)] if isinstance(pad, (int, np.integer)) else [int(v) for v in pad]
+    if not sizes or min(sizes) < 0:
+        raise InputError(
+            f"pad_rows must be a row count >= 0 or a non-empty list of them, got {pad!r}"
+        )
+    return sizes
+
+
+def write_sequence_folder(
+    seq: Sequence,
+    out_dir: str | os.PathLike[str],
+    pad_rows: Mapping[str, int | SequenceABC[int]] | None = None,
+    overwrite: bool = False,
+) -> Path:
+    """Write ``seq`` as a challenge sequence folder ``out_dir`` and return its path.
+
+    Each frame becomes ``<folder>/<stamp with 6 decimals>.npy``, an (N, 3) float64 array
+    zero-padded to ``pad_rows[sensor]`` rows (an int, or a list used cyclically frame by
+    frame, e.g. ``{"mid360": [19968, 20064], "avia": 24000}``; a frame with more points
+    than its pad size is written unpadded). Ground truth goes to ``ground_truth/``.
+    Intensity and per-point time are not part of the format and are not written. The
+    folder is built under a temporary name and renamed into place when complete.
+    """
+    target = Path(out_dir)
+    unknown = sorted({f.sensor for f in seq.frames} - set(FOLDER_OF_SENSOR))
+    if unknown:
+        raise InputError(
+            f"challenge folders only hold {', '.join(sorted(FOLDER_OF_SENSOR))} frames; "
+            f"sequence {seq.name!r} has {', '.join(unknown)}"
+        )
+    if not seq.frames:
+        raise InputError(f"sequence {seq.name!r} has no lidar frames; nothing to write to {target}")
+    pads = {s: _pad_sizes(v) for s, v in (pad_rows or {}).items()}
+    with atomic_output_dir(target, overwrite=overwrite) as tmp:
+        counters: dict[str, int] = {}
+        for frame in seq.frames:
+            folder = tmp / FOLDER_OF_SENSOR[frame.sensor]
+            if frame.sensor not in counters:
+                folder.mkdir()
+                counters[frame.sensor] = 0
+            index = counters[frame.sensor]
+            counters[frame.sensor] += 1
+            sizes = pads.get(frame.sensor)
+            n = len(frame)
+            rows = max(n, sizes[index % len(sizes)]) if sizes else n
+            data = np.zeros((rows, 3), dtype=np.float64)
+            data[:n] = frame.xyz
+            file = folder / f"{format_stamp(frame.stamp)}.npy"
+            if file.exists():
+                raise InputError(
+                    f"two {frame.sensor} frames of {seq.name!r} share stamp "
+                    f"{format_stamp(frame.stamp)}"
+                )
+            np.save(file, data)
+        if seq.ground_truth is not None and len(seq.ground_truth):
+            gt_dir = tmp / GROUND_TRUTH_FOLDER
+            gt_dir.mkdir()
+            for stamp, xyz in zip(seq.ground_truth.stamps, seq.ground_truth.xyz, strict=True):
+                np.save(
+                    gt_dir / f"{format_stamp(float(stamp))}.npy", np.asarray(xyz, dtype=np.float64)
+                )
+    return target
+
+
+def merge_time_ordered(*iterators: Iterable[Frame]) -> Iterator[Frame]:
+    """Merge frame streams that are each time-ordered into one (stamp, then sensor)."""
+    return heapq.merge(*iterators, key=lambda f: (f.stamp, f.sensor))
