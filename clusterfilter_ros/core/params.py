@@ -196,6 +196,9 @@ __all__ = [
     "ParamValue",
     "parse_assignments",
     "markdown_table",
+    "DETECTOR_PARAMS",
+    "detector_params",
+    "detector_param_specs",
 ]
 
 
@@ -205,8 +208,10 @@ def detector_param_specs() -> list[ParamSpec]:
 
 
 #: Parameters of the detection algorithm (offline and streaming). The core owns this
-#: list; defaults follow the paper's published code where it has one.
+#: list. Where the paper's published code has a value, it is noted in the description;
+#: defaults are the values tuned on simulator seeds 0-2 (see docs/detector.md).
 DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
+    # --- input filtering and denoise (paper 3.1) ---
     ParamSpec(
         "mid360_min_z",
         "float",
@@ -216,10 +221,58 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "max_range",
+        "float",
+        500.0,
+        "Points farther than this from the sensor origin (m) are dropped.",
+        minimum=1.0,
+        maximum=2000.0,
+    ),
+    ParamSpec(
+        "denoise_sensors",
+        "str_list",
+        ["avia"],
+        "Sensors whose points pass the density denoise (paper 3.1: the Avia); empty list = none.",
+    ),
+    ParamSpec(
+        "denoise_voxel",
+        "float",
+        2.0,
+        "Voxel edge (m) of the denoise density count (3x3x3 voxel neighbourhood).",
+        minimum=0.05,
+        maximum=50.0,
+    ),
+    ParamSpec(
+        "denoise_min_points",
+        "int",
+        3,
+        "A point survives the denoise if its neighbourhood holds at least this many points "
+        "(itself included) over the superimposed frames.",
+        minimum=1,
+        maximum=10000,
+    ),
+    ParamSpec(
+        "denoise_window",
+        "float",
+        2.0,
+        "Streaming: seconds of past frames superimposed for the denoise (offline uses all).",
+        minimum=0.1,
+        maximum=60.0,
+    ),
+    # --- global clustering (paper 3.2) ---
+    ParamSpec(
+        "clustering",
+        "str",
+        "voxel",
+        "Global clusterer: 'voxel' (26-neighbour voxel connected components approximating "
+        "DBSCAN) or 'dbscan' (scikit-learn DBSCAN on points, paper-faithful, slow; offline only).",
+        choices=("voxel", "dbscan"),
+    ),
+    ParamSpec(
         "eps",
         "float",
         2.0,
-        "Neighbourhood radius (m) of the density clustering of the global cloud.",
+        "DBSCAN neighbourhood radius (m) for clustering='dbscan' (paper code: 2.0).",
         minimum=0.05,
         maximum=20.0,
     ),
@@ -227,17 +280,222 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "min_samples",
         "int",
         10,
-        "Points within eps that make a point a core point of a cluster.",
+        "Points in the neighbourhood that make a point (dbscan) or voxel (voxel) a core "
+        "(paper code: 10).",
         minimum=1,
         maximum=10000,
+    ),
+    ParamSpec(
+        "cluster_voxel",
+        "float",
+        1.0,
+        "Voxel edge (m) of the voxel clusterer; its 3x3x3 neighbourhood plays DBSCAN's eps ball.",
+        minimum=0.05,
+        maximum=20.0,
     ),
     ParamSpec(
         "voxel_size",
         "float",
         0.2,
-        "Edge (m) of the voxels used for occupied volume, density and IoU.",
+        "Edge (m) of the voxels used for occupied volume, density and IoU (paper code: 0.2).",
         minimum=0.01,
         maximum=5.0,
+    ),
+    # --- candidate gates ---
+    ParamSpec(
+        "min_cluster_points",
+        "int",
+        100,
+        "A global cluster with fewer points is not a candidate (paper code: 100).",
+        minimum=1,
+        maximum=10000000,
+    ),
+    ParamSpec(
+        "max_cluster_points",
+        "int",
+        10000,
+        "A global cluster with more points is not a candidate (paper code: 10000).",
+        minimum=1,
+        maximum=100000000,
+    ),
+    ParamSpec(
+        "min_centroid_z",
+        "float",
+        6.0,
+        "A global cluster whose centroid is lower (m) is not a candidate (paper code: 6.0).",
+        minimum=-100.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
+        "min_volume",
+        "float",
+        0.3,
+        "A global cluster occupying less volume (m^3 of voxel_size voxels) is not a "
+        "candidate (paper code: 0.3).",
+        minimum=0.0,
+        maximum=100000.0,
+    ),
+    ParamSpec(
+        "max_extent",
+        "float",
+        1000.0,
+        "A global cluster whose bounding box is wider (m, largest side) than this over "
+        "the window is not a candidate (1000 = off).",
+        minimum=0.1,
+        maximum=1000.0,
+    ),
+    ParamSpec(
+        "max_local_extent",
+        "float",
+        4.0,
+        "Normalized scoring only: a cluster whose points within one shortest local window "
+        "span more than this (m, mean largest bounding-box side) is not a candidate "
+        "(walls, trees, buildings).",
+        minimum=0.1,
+        maximum=1000.0,
+    ),
+    # --- local windows and scoring (paper 3.2-3.3) ---
+    ParamSpec(
+        "frames",
+        "float_list",
+        [2.0, 5.0, 10.0],
+        "Local window lengths in frames (one frame = frame_period s); paper code: 2, 5, 10.",
+        minimum=1.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
+        "frame_period",
+        "float",
+        0.1,
+        "Seconds per lidar frame (10 Hz Livox); turns 'frames' into time windows.",
+        minimum=0.001,
+        maximum=10.0,
+    ),
+    ParamSpec(
+        "scoring",
+        "str",
+        "normalized",
+        "Cluster ranking: 'paper' (sum exp(R) + iou_weight * sum log(1/IoU)) or "
+        "'normalized' (per-window means mapped to [0, 1], with temporal support).",
+        choices=("paper", "normalized"),
+    ),
+    ParamSpec(
+        "iou_weight",
+        "float",
+        1.0,
+        "The paper's lambda: weight of the voxel IoU term against the density term.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "iou_floor",
+        "float",
+        0.01,
+        "IoU values are clamped to at least this before log(1/IoU) (log(1/0) is infinite).",
+        minimum=1e-6,
+        maximum=1.0,
+    ),
+    ParamSpec(
+        "min_support_frames",
+        "int",
+        5,
+        "Normalized scoring: full confidence needs drone points in at least this many "
+        "distinct frames; fewer scale the confidence down.",
+        minimum=1,
+        maximum=100000,
+    ),
+    ParamSpec(
+        "min_confidence",
+        "float",
+        0.5,
+        "Clusters and estimates below this confidence are not reported.",
+        minimum=0.0,
+        maximum=1.0,
+    ),
+    # --- trajectory and estimates (paper 3.4) ---
+    ParamSpec(
+        "max_gap",
+        "float",
+        1.0,
+        "The trajectory is split where drone points are more than this many seconds apart; "
+        "no estimate inside such gaps.",
+        minimum=0.01,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "max_extrapolation",
+        "float",
+        0.3,
+        "No estimate more than this many seconds beyond the first/last drone point.",
+        minimum=0.0,
+        maximum=10.0,
+    ),
+    ParamSpec(
+        "min_points",
+        "int",
+        1,
+        "An estimate needs at least this many drone points within track_window seconds.",
+        minimum=1,
+        maximum=100000,
+    ),
+    ParamSpec(
+        "track_window",
+        "float",
+        1.0,
+        "Seconds of drone points the streaming position fit uses (and the support count).",
+        minimum=0.05,
+        maximum=30.0,
+    ),
+    ParamSpec(
+        "track_gate",
+        "float",
+        2.0,
+        "Streaming: new points within this distance (m) of the predicted position join the "
+        "track between re-clusterings.",
+        minimum=0.0,
+        maximum=50.0,
+    ),
+    # --- streaming accumulator ---
+    ParamSpec(
+        "global_window",
+        "float",
+        10.0,
+        "Streaming: seconds of history in the global accumulator (voxel counts decay with "
+        "this time constant and voxels unseen for this long are dropped).",
+        minimum=0.5,
+        maximum=600.0,
+    ),
+    ParamSpec(
+        "recluster_period",
+        "float",
+        0.5,
+        "Streaming: seconds between global re-clusterings.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "local_history",
+        "float",
+        3.0,
+        "Streaming: seconds of raw points kept for the local windows and drone points.",
+        minimum=0.2,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "max_accumulator_voxels",
+        "int",
+        400000,
+        "Streaming: cap on occupied voxels in the global accumulator (weakest dropped first).",
+        minimum=1000,
+        maximum=100000000,
+    ),
+    ParamSpec(
+        "max_local_points",
+        "int",
+        300000,
+        "Streaming: cap on raw points kept for the local windows (oldest frames dropped first).",
+        minimum=1000,
+        maximum=100000000,
     ),
     ParamSpec(
         "target_offset",
@@ -249,3 +507,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         length=3,
     ),
 )
+
+
+def detector_params(values: Mapping[str, Any] | None = None) -> ParamSet:
+    """A validated :class:`ParamSet` of the detector parameters (defaults + ``values``)."""
+    return ParamSet(DETECTOR_PARAMS, values)

@@ -1,0 +1,134 @@
+"""Offline detection: the paper's whole-sequence method (sections 3.1-3.4).
+
+1. Filter every frame (:func:`~clusterfilter_ros.core.preprocess.frame_points`) and
+   superimpose all of them into the global cloud.
+2. Denoise the points of ``denoise_sensors`` by density over the whole sequence.
+3. Cluster the global cloud (voxel connected components, or DBSCAN).
+4. Score every cluster from its local windows; gate; select the drone cluster(s).
+5. Fit the trajectory through the selected points and evaluate it at the frame stamps
+   (or given timestamps) inside the supported span.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from clusterfilter_ros.core.clustering import (
+    dbscan_points,
+    density_mask,
+    relabel_compact,
+    voxel_cluster_points,
+)
+from clusterfilter_ros.core.frame import Frame, TimedPositions
+from clusterfilter_ros.core.params import ParamSet, detector_params
+from clusterfilter_ros.core.preprocess import frame_points
+from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
+from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory
+
+
+@dataclass
+class OfflineResult:
+    """What :func:`detect_offline` found.
+
+    Attributes:
+        estimates: positions (target_offset applied) with extra columns ``confidence``
+            and ``points`` (drone points within ``track_window``), only where a drone
+            is believed present.
+        drone_points: (M, 4) float64 rows ``t, x, y, z`` of the selected clusters' points.
+        trajectory: the fitted :class:`~clusterfilter_ros.core.trajectory.Trajectory`
+            (without target_offset), or None when no drone was found.
+        clusters: one dict per global cluster (features, scores, gates, ``selected``).
+        scores: the raw :class:`~clusterfilter_ros.core.scoring.ClusterScores`.
+        selected: indices of the selected clusters, best first.
+    """
+
+    estimates: TimedPositions
+    drone_points: np.ndarray
+    trajectory: Trajectory | None
+    clusters: list[dict[str, float]] = field(default_factory=list)
+    scores: ClusterScores | None = None
+    selected: list[int] = field(default_factory=list)
+
+
+def global_cloud(
+    frames: Iterable[Frame], params: ParamSet
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Superimpose filtered frames: (xyz (N,3) f32, t (N,), denoise flag (N,) bool, stamps)."""
+    xyzs, ts, flags, stamps = [], [], [], []
+    denoise = set(params.denoise_sensors)
+    for frame in frames:
+        stamps.append(frame.stamp)
+        xyz, t = frame_points(frame, params)
+        xyzs.append(xyz)
+        ts.append(t)
+        flags.append(np.full(t.size, frame.sensor in denoise))
+    if not xyzs:
+        return np.empty((0, 3), np.float32), np.empty(0), np.empty(0, bool), np.empty(0)
+    stamp_arr = np.asarray(stamps, dtype=np.float64)
+    return (
+        np.concatenate(xyzs),
+        np.concatenate(ts),
+        np.concatenate(flags),
+        np.unique(stamp_arr[np.isfinite(stamp_arr)]),
+    )
+
+
+def cluster_labels(xyz: np.ndarray, params: ParamSet) -> np.ndarray:
+    """Global cluster label per point (-1 noise) with the configured clusterer."""
+    if params.clustering == "dbscan":
+        return dbscan_points(xyz, params.eps, params.min_samples)
+    return voxel_cluster_points(xyz, params.cluster_voxel, params.min_samples)
+
+
+def detect_offline(
+    frames: Iterable[Frame],
+    params: ParamSet | None = None,
+    timestamps: np.ndarray | None = None,
+) -> OfflineResult:
+    """Detect the drone over a whole sequence; see the module docstring."""
+    params = detector_params() if params is None else params
+    xyz, t, noisy, stamps = global_cloud(frames, params)
+    keep = np.ones(t.size, dtype=bool)
+    if noisy.any():
+        keep[noisy] = density_mask(xyz[noisy], params.denoise_voxel, params.denoise_min_points)
+    xyz, t = xyz[keep], t[keep]
+    labels, k = relabel_compact(cluster_labels(xyz, params))
+    scores = score_clusters(labels, xyz, t, params, n_clusters=k)
+    selected = select_clusters(scores, params)
+    rows = scores.rows()
+    for row in rows:
+        row["selected"] = float(int(row["cluster"]) in selected)
+    empty = TimedPositions(
+        np.empty(0), np.empty((0, 3)), {"confidence": np.empty(0), "points": np.empty(0, int)}
+    )
+    if not selected:
+        return OfflineResult(empty, np.empty((0, 4)), None, rows, scores, selected)
+    drone = np.isin(labels, selected)
+    conf_pts = scores.confidence[labels[drone]]
+    traj = fit_trajectory(
+        t[drone],
+        xyz[drone],
+        max_gap=params.max_gap,
+        max_extrapolation=params.max_extrapolation,
+        bin_seconds=params.frame_period / 2,
+        confidence=conf_pts,
+    )
+    drone_points = np.column_stack([t[drone], xyz[drone].astype(np.float64)])
+    drone_points = drone_points[np.argsort(drone_points[:, 0], kind="stable")]
+    if traj is None:
+        return OfflineResult(empty, drone_points, None, rows, scores, selected)
+    query = stamps if timestamps is None else np.asarray(timestamps, dtype=np.float64).reshape(-1)
+    query = query[np.isfinite(query)]
+    pos = traj(query)
+    conf = traj.confidence(query)
+    support = traj.support(query, params.track_window)
+    ok = np.isfinite(pos).all(axis=1) & (conf >= params.min_confidence)
+    ok &= support >= params.min_points
+    offset = np.asarray(params.target_offset, dtype=np.float64)
+    estimates = TimedPositions(
+        query[ok], pos[ok] + offset, {"confidence": conf[ok], "points": support[ok]}
+    )
+    return OfflineResult(estimates, drone_points, traj, rows, scores, selected)

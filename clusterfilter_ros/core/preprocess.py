@@ -1,0 +1,34 @@
+"""Per-frame input filtering shared by the offline and streaming detectors."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.frame import MID360, Frame
+from clusterfilter_ros.core.params import ParamSet
+
+
+def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray]:
+    """The usable points of a frame: (xyz float32 (N, 3), per-point time float64 (N,)).
+
+    Drops non-finite rows, all-zero padding rows, points beyond ``max_range`` and, for the
+    Mid360, points at or below ``mid360_min_z``. Per-point time is ``stamp + point_time``
+    when the frame has per-point offsets, else the stamp.
+    """
+    xyz = frame.xyz
+    if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
+        return np.empty((0, 3), np.float32), np.empty(0, np.float64)
+    keep = np.isfinite(xyz).all(axis=1)
+    keep &= (xyz != 0).any(axis=1)
+    r2 = np.einsum("ij,ij->i", xyz, xyz, dtype=np.float64)
+    keep &= r2 <= float(params.max_range) ** 2
+    if frame.sensor == MID360:
+        keep &= xyz[:, 2] > params.mid360_min_z
+    pts = xyz[keep]
+    if frame.point_time is not None:
+        offs = frame.point_time[keep]
+        offs = np.where(np.isfinite(offs) & (np.abs(offs) < 1.0), offs, 0.0)
+        t = frame.stamp + offs
+    else:
+        t = np.full(pts.shape[0], frame.stamp)
+    return np.ascontiguousarray(pts, dtype=np.float32), t

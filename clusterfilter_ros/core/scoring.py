@@ -1,0 +1,298 @@
+"""Per-cluster global/local features and scores (paper 3.2 local windows, 3.3 scoring).
+
+For every global cluster k:
+- global density rho_g = points / occupied voxels (voxel_size voxels; the voxel volume
+  cancels in every ratio below, so densities are in points per voxel);
+- for each local window length w in ``frames`` (w * frame_period seconds, consecutive
+  non-overlapping windows starting at ``t0``): the cluster's points inside the window
+  (never re-clustered), their local density rho_l and the relative density
+  R = rho_l / rho_g; the voxel IoU between the voxel sets of consecutive windows;
+- the paper's score ``sum exp(R) + iou_weight * sum log(1 / max(IoU, iou_floor))``;
+- the normalized score: ``(mean min(R, 1) + iou_weight * mean log(1/IoU) / log(1/iou_floor))
+  / (1 + iou_weight)``, times ``min(1, support_frames / min_support_frames)``; in [0, 1]
+  and used as the cluster's confidence in both scoring modes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.params import ParamSet
+
+
+@dataclass
+class ClusterScores:
+    """Features and scores of K global clusters (every attribute is a length-K array)."""
+
+    n_points: np.ndarray
+    n_voxels: np.ndarray
+    volume: np.ndarray
+    centroid: np.ndarray
+    extent: np.ndarray
+    t_first: np.ndarray
+    t_last: np.ndarray
+    support_frames: np.ndarray
+    n_windows: np.ndarray
+    n_pairs: np.ndarray
+    mean_relative_density: np.ndarray
+    mean_iou: np.ndarray
+    local_extent: np.ndarray
+    paper_score: np.ndarray
+    normalized_score: np.ndarray
+    confidence: np.ndarray
+    candidate: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.n_points.shape[0])
+
+    def rank_score(self, scoring: str) -> np.ndarray:
+        """The score clusters are ranked by in the given scoring mode."""
+        return self.paper_score if scoring == "paper" else self.normalized_score
+
+    def rows(self) -> list[dict[str, float]]:
+        """One dict per cluster, for debugging, tables and JSON."""
+        out = []
+        for k in range(len(self)):
+            row: dict[str, float] = {"cluster": k}
+            for f in fields(self):
+                v = getattr(self, f.name)[k]
+                if f.name == "centroid":
+                    row.update({"cx": float(v[0]), "cy": float(v[1]), "cz": float(v[2])})
+                else:
+                    row[f.name] = float(v)
+            out.append(row)
+        return out
+
+
+def _empty(k: int) -> ClusterScores:
+    z = np.zeros(k)
+    return ClusterScores(
+        n_points=z.copy(),
+        n_voxels=z.copy(),
+        volume=z.copy(),
+        centroid=np.zeros((k, 3)),
+        extent=z.copy(),
+        t_first=z.copy(),
+        t_last=z.copy(),
+        support_frames=z.copy(),
+        n_windows=z.copy(),
+        n_pairs=z.copy(),
+        mean_relative_density=z.copy(),
+        mean_iou=z.copy(),
+        local_extent=z.copy(),
+        paper_score=z.copy(),
+        normalized_score=z.copy(),
+        confidence=z.copy(),
+        candidate=np.zeros(k, dtype=bool),
+    )
+
+
+_SUMS = (
+    "sum_exp_r",
+    "sum_r_capped",
+    "n_windows",
+    "sum_log_inv_iou",
+    "sum_iou",
+    "n_pairs",
+    "sum_extent",
+)
+
+
+def local_window_features(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    fine_keys: np.ndarray,
+    global_density: np.ndarray,
+    window_seconds: float,
+    t0: float,
+    iou_floor: float,
+) -> dict[str, np.ndarray]:
+    """Sums over one window length's local windows, per cluster (length-K arrays).
+
+    Returns ``sum_exp_r``, ``sum_r_capped`` (sum of min(R, 1)), ``n_windows``,
+    ``sum_log_inv_iou``, ``sum_iou``, ``n_pairs`` and ``sum_extent`` (sum over windows of
+    the largest bounding-box side of the window's points). ``labels`` must be 0..K-1.
+    """
+    k = global_density.shape[0]
+    out = {name: np.zeros(k) for name in _SUMS}
+    if labels.size == 0:
+        return out
+    win = np.floor((t - t0) / window_seconds + 1e-6).astype(np.int64)
+    win -= win.min()
+    n_win = int(win.max()) + 1
+    _, fid = np.unique(fine_keys, return_inverse=True)
+    n_fine = int(fid.max()) + 1
+    # (cluster, window) point counts and voxel counts.
+    cw = labels * n_win + win
+    cw_u, cw_inv, cw_points = np.unique(cw, return_inverse=True, return_counts=True)
+    cw_inv = cw_inv.reshape(-1)
+    lo = np.full((cw_u.size, 3), np.inf)
+    hi = np.full((cw_u.size, 3), -np.inf)
+    np.minimum.at(lo, cw_inv, xyz)
+    np.maximum.at(hi, cw_inv, xyz)
+    triple = (labels * n_fine + fid.reshape(-1)) * n_win + win
+    triple_u = np.unique(triple)
+    t_cw = (triple_u // (n_win * n_fine)) * n_win + triple_u % n_win
+    t_cw_idx = np.searchsorted(cw_u, t_cw)
+    cw_voxels = np.bincount(t_cw_idx, minlength=cw_u.size).astype(np.float64)
+    cw_cluster = cw_u // n_win
+    rel = (cw_points / cw_voxels) / global_density[cw_cluster]
+    out["sum_exp_r"] = np.bincount(cw_cluster, weights=np.exp(np.minimum(rel, 50.0)), minlength=k)
+    out["sum_r_capped"] = np.bincount(cw_cluster, weights=np.minimum(rel, 1.0), minlength=k)
+    out["n_windows"] = np.bincount(cw_cluster, minlength=k).astype(np.float64)
+    out["sum_extent"] = np.bincount(cw_cluster, weights=(hi - lo).max(axis=1), minlength=k)
+    # Intersections: the same (cluster, voxel) in windows j and j + 1 (triples are
+    # sorted by cluster, voxel, window, so such entries are adjacent).
+    same_voxel = (triple_u[1:] // n_win) == (triple_u[:-1] // n_win)
+    next_window = (triple_u[1:] % n_win) == (triple_u[:-1] % n_win) + 1
+    inter_at = t_cw_idx[:-1][same_voxel & next_window]
+    inter = np.bincount(inter_at, minlength=cw_u.size).astype(np.float64)
+    # Pairs: (cluster, j) and (cluster, j + 1) both present (cw_u sorted => adjacent).
+    pair = cw_u[1:] == cw_u[:-1] + 1
+    pair &= (cw_u[1:] // n_win) == (cw_u[:-1] // n_win)
+    first = np.nonzero(pair)[0]
+    union = cw_voxels[first] + cw_voxels[first + 1] - inter[first]
+    iou = inter[first] / union
+    pc = cw_cluster[first]
+    out["sum_log_inv_iou"] = np.bincount(
+        pc, weights=np.log(1.0 / np.maximum(iou, iou_floor)), minlength=k
+    )
+    out["sum_iou"] = np.bincount(pc, weights=iou, minlength=k)
+    out["n_pairs"] = np.bincount(pc, minlength=k).astype(np.float64)
+    return out
+
+
+def score_clusters(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    params: ParamSet,
+    *,
+    n_clusters: int,
+    global_points: np.ndarray | None = None,
+    global_voxels: np.ndarray | None = None,
+    t0: float | None = None,
+) -> ClusterScores:
+    """Features, gates and scores of clusters ``0..n_clusters-1``.
+
+    ``labels``/``xyz``/``t`` are the points the local windows are drawn from (label -1
+    ignored). ``global_points``/``global_voxels`` give each cluster's global point count
+    and occupied voxel count when the global cloud is not these points (streaming: the
+    voxel accumulator); by default both come from the points themselves.
+    """
+    k = int(n_clusters)
+    res = _empty(k)
+    if k == 0:
+        return res
+    labels = np.asarray(labels, dtype=np.int64)
+    keep = labels >= 0
+    lab = labels[keep]
+    pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[keep]
+    tt = np.asarray(t, dtype=np.float64)[keep]
+    vs = float(params.voxel_size)
+    fine = voxel.voxel_keys(pts, vs)
+    counts = np.bincount(lab, minlength=k).astype(np.float64)
+    if global_points is None or global_voxels is None:
+        g_vox = np.zeros(k)
+        if lab.size:
+            _, fid = np.unique(fine, return_inverse=True)
+            n_fine = int(fid.max()) + 1
+            pair_u = np.unique(lab * n_fine + fid.reshape(-1))
+            g_vox = np.bincount(pair_u // n_fine, minlength=k).astype(np.float64)
+        g_pts = counts.copy()
+    else:
+        g_pts = np.asarray(global_points, dtype=np.float64)
+        g_vox = np.asarray(global_voxels, dtype=np.float64)
+    res.n_points = g_pts
+    res.n_voxels = g_vox
+    res.volume = g_vox * vs**3
+    global_density = np.where(g_vox > 0, g_pts / np.maximum(g_vox, 1.0), 1.0)
+    global_density = np.where(global_density > 0, global_density, 1.0)
+    if lab.size:
+        for axis in range(3):
+            res.centroid[:, axis] = np.bincount(
+                lab, weights=pts[:, axis], minlength=k
+            ) / np.maximum(counts, 1.0)
+        lo = np.full((k, 3), np.inf)
+        hi = np.full((k, 3), -np.inf)
+        np.minimum.at(lo, lab, pts)
+        np.maximum.at(hi, lab, pts)
+        res.extent = np.where(counts > 0, (hi - lo).max(axis=1), 0.0)
+        tf = np.full(k, np.inf)
+        tl = np.full(k, -np.inf)
+        np.minimum.at(tf, lab, tt)
+        np.maximum.at(tl, lab, tt)
+        res.t_first = np.where(counts > 0, tf, np.nan)
+        res.t_last = np.where(counts > 0, tl, np.nan)
+        origin = float(tt.min()) if t0 is None else float(t0)
+        fp = float(params.frame_period)
+        frame_bin = np.floor((tt - origin) / fp + 1e-6).astype(np.int64)
+        fb = np.unique(lab * (int(frame_bin.max()) + 1) + frame_bin)
+        res.support_frames = np.bincount(fb // (int(frame_bin.max()) + 1), minlength=k).astype(
+            np.float64
+        )
+        sums = {n: np.zeros(k) for n in _SUMS}
+        for i, w in enumerate(sorted(params.frames)):
+            part = local_window_features(
+                lab, pts, tt, fine, global_density, float(w) * fp, origin, float(params.iou_floor)
+            )
+            if i == 0:  # extent over the shortest windows
+                res.local_extent = part["sum_extent"] / np.maximum(part["n_windows"], 1.0)
+            for name in sums:
+                sums[name] += part[name]
+        res.n_windows = sums["n_windows"]
+        res.n_pairs = sums["n_pairs"]
+        nw = np.maximum(sums["n_windows"], 1.0)
+        npairs = np.maximum(sums["n_pairs"], 1.0)
+        res.mean_relative_density = sums["sum_r_capped"] / nw
+        res.mean_iou = np.where(sums["n_pairs"] > 0, sums["sum_iou"] / npairs, 1.0)
+        lam = float(params.iou_weight)
+        res.paper_score = sums["sum_exp_r"] + lam * sums["sum_log_inv_iou"]
+        iou_term = np.where(
+            sums["n_pairs"] > 0,
+            sums["sum_log_inv_iou"] / npairs / np.log(1.0 / float(params.iou_floor)),
+            0.0,
+        )
+        res.normalized_score = (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
+        support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
+        res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
+    res.candidate = (
+        (res.n_points >= params.min_cluster_points)
+        & (res.n_points <= params.max_cluster_points)
+        & (res.centroid[:, 2] >= params.min_centroid_z)
+        & (res.volume >= params.min_volume - 1e-9)
+        & (res.extent <= params.max_extent)
+        & (counts > 0)
+    )
+    if params.scoring != "paper":
+        res.candidate &= res.local_extent <= params.max_local_extent
+    return res
+
+
+def select_clusters(scores: ClusterScores, params: ParamSet) -> list[int]:
+    """Clusters reported as the drone, best first.
+
+    The best-ranked candidate (gates passed, confidence >= ``min_confidence``) is taken;
+    with 'normalized' scoring, further qualifying candidates whose time spans do not
+    overlap the ones already taken follow (a track broken into pieces). The paper's
+    mode keeps its single best cluster.
+    """
+    ok = scores.candidate & (scores.confidence >= params.min_confidence)
+    if not ok.any():
+        return []
+    rank = scores.rank_score(params.scoring)
+    order = [int(i) for i in np.argsort(-rank, kind="stable") if ok[i]]
+    if params.scoring == "paper":
+        return order[:1]
+    chosen: list[int] = []
+    for i in order:
+        if all(
+            scores.t_last[i] < scores.t_first[j] or scores.t_first[i] > scores.t_last[j]
+            for j in chosen
+        ):
+            chosen.append(i)
+    return chosen

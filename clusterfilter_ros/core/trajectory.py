@@ -1,0 +1,167 @@
+"""Trajectory from time-ordered drone points (paper 3.4).
+
+Drone points are first averaged per time bin (half a frame period), giving one sample
+per frame weighted by its number of points. The samples are split into segments where
+consecutive samples are more than ``max_gap`` seconds apart. Each segment with at least
+five samples gets a cubic smoothing B-spline per axis
+(:func:`scipy.interpolate.make_smoothing_spline`, smoothing chosen by generalised
+cross-validation); shorter segments get a weighted straight line (or a constant).
+Positions are defined only inside a segment's span widened by ``max_extrapolation``
+seconds at each end (linear continuation there); elsewhere the answer is NaN.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import make_smoothing_spline
+
+
+def time_samples(
+    t: np.ndarray, xyz: np.ndarray, bin_seconds: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Average points per time bin: (times (S,), positions (S, 3), point counts (S,))."""
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    if t.size == 0:
+        return np.empty(0), np.empty((0, 3)), np.empty(0)
+    b = np.floor((t - t.min()) / bin_seconds).astype(np.int64)
+    ub, inv, counts = np.unique(b, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    tm = np.bincount(inv, weights=t) / counts
+    pos = np.stack([np.bincount(inv, weights=xyz[:, a]) / counts for a in range(3)], axis=1)
+    return tm, pos, counts.astype(np.float64)
+
+
+@dataclass
+class _Segment:
+    t_start: float
+    t_end: float
+    kind: str  # "spline", "line" or "constant"
+    model: object
+    confidence: float
+    n_samples: int
+
+    def value(self, t: np.ndarray) -> np.ndarray:
+        if self.kind == "constant":
+            return np.repeat(np.asarray(self.model)[None, :], t.size, axis=0)
+        if self.kind == "line":
+            slope, intercept, tc = self.model
+            return intercept[None, :] + (t - tc)[:, None] * slope[None, :]
+        splines = self.model
+        tc = np.clip(t, self.t_start, self.t_end)
+        out = np.stack([s(tc) for s in splines], axis=1)
+        outside = t != tc
+        if outside.any():
+            deriv = np.stack([s.derivative()(tc[outside]) for s in splines], axis=1)
+            out[outside] += (t[outside] - tc[outside])[:, None] * deriv
+        return out
+
+
+@dataclass
+class Trajectory:
+    """Piecewise smooth drone trajectory; evaluable only where the evidence supports it."""
+
+    segments: list[_Segment] = field(default_factory=list)
+    max_extrapolation: float = 0.3
+    sample_times: np.ndarray = field(default_factory=lambda: np.empty(0))
+    sample_counts: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def span(self) -> tuple[float, float]:
+        if not self.segments:
+            return (float("nan"), float("nan"))
+        return (self.segments[0].t_start, self.segments[-1].t_end)
+
+    def segment_index(self, stamps: np.ndarray) -> np.ndarray:
+        """Index of the segment supporting each stamp, -1 where none does."""
+        stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+        out = np.full(stamps.size, -1, dtype=np.int64)
+        m = self.max_extrapolation
+        for i, seg in enumerate(self.segments):
+            inside = (stamps >= seg.t_start - m) & (stamps <= seg.t_end + m) & (out < 0)
+            out[inside] = i
+        return out
+
+    def __call__(self, stamps: np.ndarray) -> np.ndarray:
+        """(M, 3) positions at ``stamps``; NaN rows where unsupported."""
+        stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+        out = np.full((stamps.size, 3), np.nan)
+        seg_idx = self.segment_index(stamps)
+        for i, seg in enumerate(self.segments):
+            sel = seg_idx == i
+            if sel.any():
+                out[sel] = seg.value(stamps[sel])
+        return out
+
+    def confidence(self, stamps: np.ndarray) -> np.ndarray:
+        """Confidence of the segment supporting each stamp (0 where none)."""
+        seg_idx = self.segment_index(stamps)
+        conf = np.array([s.confidence for s in self.segments] + [0.0])
+        return conf[seg_idx]
+
+    def support(self, stamps: np.ndarray, window: float) -> np.ndarray:
+        """Drone points within +-window/2 of each stamp."""
+        stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+        if self.sample_times.size == 0:
+            return np.zeros(stamps.size, dtype=np.int64)
+        csum = np.concatenate([[0.0], np.cumsum(self.sample_counts)])
+        lo = np.searchsorted(self.sample_times, stamps - window / 2, side="left")
+        hi = np.searchsorted(self.sample_times, stamps + window / 2, side="right")
+        return (csum[hi] - csum[lo]).astype(np.int64)
+
+
+def fit_trajectory(
+    t: np.ndarray,
+    xyz: np.ndarray,
+    *,
+    max_gap: float,
+    max_extrapolation: float,
+    bin_seconds: float = 0.05,
+    confidence: np.ndarray | None = None,
+) -> Trajectory | None:
+    """Fit a :class:`Trajectory` to drone points (t (N,), xyz (N, 3)); None if no points.
+
+    ``confidence`` (N,) optional per-point confidence; a segment's confidence is the
+    point-weighted mean over its points.
+    """
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    good = np.isfinite(t) & np.isfinite(xyz).all(axis=1)
+    t, xyz = t[good], xyz[good]
+    if t.size == 0:
+        return None
+    conf_pts = np.ones(t.size) if confidence is None else np.asarray(confidence)[good]
+    order = np.argsort(t, kind="stable")
+    t, xyz, conf_pts = t[order], xyz[order], conf_pts[order]
+    ts, ps, ws = time_samples(t, xyz, bin_seconds)
+    _, cs, _ = time_samples(t, np.repeat(conf_pts[:, None], 3, axis=1), bin_seconds)
+    cs = cs[:, 0]
+    breaks = np.nonzero(np.diff(ts) > max_gap)[0] + 1
+    segments = []
+    for idx in np.split(np.arange(ts.size), breaks):
+        st, sp, sw, sc = ts[idx], ps[idx], ws[idx], cs[idx]
+        conf = float(np.average(sc, weights=sw))
+        if st.size >= 5 and st[-1] - st[0] > 0:
+            splines = []
+            for a in range(3):
+                try:
+                    splines.append(make_smoothing_spline(st, sp[:, a], w=sw / sw.mean()))
+                except (ValueError, np.linalg.LinAlgError):
+                    splines = []
+                    break
+            if splines:
+                segments.append(_Segment(st[0], st[-1], "spline", splines, conf, st.size))
+                continue
+        if st.size >= 2 and st[-1] - st[0] > 0:
+            tc = float(np.average(st, weights=sw))
+            dt = st - tc
+            denom = float(np.sum(sw * dt * dt))
+            mean = np.average(sp, axis=0, weights=sw)
+            slope = (sw[:, None] * dt[:, None] * (sp - mean)).sum(axis=0) / denom
+            segments.append(_Segment(st[0], st[-1], "line", (slope, mean, tc), conf, st.size))
+        else:
+            mean = np.average(sp, axis=0, weights=sw)
+            segments.append(_Segment(st[0], st[-1], "constant", mean, conf, st.size))
+    return Trajectory(segments, max_extrapolation, ts, ws)

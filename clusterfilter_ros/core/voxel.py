@@ -1,0 +1,108 @@
+"""Vectorised voxel-grid primitives: packed int64 voxel keys and their neighbourhoods.
+
+A voxel key packs the integer voxel indices (ix, iy, iz), each offset by 2**20 into 21
+bits, into one int64, so that a neighbour at (dx, dy, dz) has key ``key + offset_key``
+and sorted key arrays can be searched with :func:`numpy.searchsorted`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_BITS = 21
+_OFFSET = 1 << (_BITS - 1)
+_MASK = (1 << _BITS) - 1
+#: Voxel indices are clipped to this range so that neighbour keys never overflow a field.
+_LIMIT = _OFFSET - 2
+
+#: The 13 "forward" neighbour offsets of the 26-neighbourhood (each pair counted once).
+HALF_OFFSETS = np.array(
+    [
+        (dx, dy, dz)
+        for dx in (-1, 0, 1)
+        for dy in (-1, 0, 1)
+        for dz in (-1, 0, 1)
+        if (dx, dy, dz) > (0, 0, 0)
+    ],
+    dtype=np.int64,
+)
+
+
+def voxel_indices(xyz: np.ndarray, size: float) -> np.ndarray:
+    """(N, 3) int64 voxel indices of points for voxels of edge ``size`` metres."""
+    idx = np.floor(np.asarray(xyz, dtype=np.float64) / float(size)).astype(np.int64)
+    np.clip(idx, -_LIMIT, _LIMIT, out=idx)
+    return idx
+
+
+def pack(idx: np.ndarray) -> np.ndarray:
+    """Pack (N, 3) int64 voxel indices into (N,) int64 keys."""
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1, 3) + _OFFSET
+    return (idx[:, 0] << (2 * _BITS)) | (idx[:, 1] << _BITS) | idx[:, 2]
+
+
+def unpack(keys: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`pack`: (N,) keys to (N, 3) int64 voxel indices."""
+    keys = np.asarray(keys, dtype=np.int64)
+    out = np.empty((keys.shape[0], 3), dtype=np.int64)
+    out[:, 0] = (keys >> (2 * _BITS)) & _MASK
+    out[:, 1] = (keys >> _BITS) & _MASK
+    out[:, 2] = keys & _MASK
+    return out - _OFFSET
+
+
+def voxel_keys(xyz: np.ndarray, size: float) -> np.ndarray:
+    """(N,) int64 keys of the voxels of edge ``size`` containing each point."""
+    return pack(voxel_indices(xyz, size))
+
+
+def offset_key(offset: np.ndarray) -> int:
+    """Key difference between a voxel and its neighbour at integer ``offset``."""
+    dx, dy, dz = (int(v) for v in offset)
+    return (dx << (2 * _BITS)) + (dy << _BITS) + dz
+
+
+def neighbour_pairs(sorted_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All 26-adjacent pairs (i, j) of a sorted unique key array, each pair once."""
+    n = sorted_keys.shape[0]
+    firsts, seconds = [], []
+    if n == 0:
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty
+    for off in HALF_OFFSETS:
+        target = sorted_keys + offset_key(off)
+        pos = np.searchsorted(sorted_keys, target)
+        pos_c = np.minimum(pos, n - 1)
+        hit = sorted_keys[pos_c] == target
+        if hit.any():
+            firsts.append(np.nonzero(hit)[0])
+            seconds.append(pos_c[hit])
+    if not firsts:
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty
+    return np.concatenate(firsts), np.concatenate(seconds)
+
+
+def neighbourhood_sums(
+    sorted_keys: np.ndarray,
+    weights: np.ndarray,
+    pairs: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Sum of ``weights`` over each voxel's 3x3x3 neighbourhood (itself included)."""
+    first, second = neighbour_pairs(sorted_keys) if pairs is None else pairs
+    w = np.asarray(weights, dtype=np.float64)
+    total = w.copy()
+    if first.size:
+        total += np.bincount(first, weights=w[second], minlength=w.size)
+        total += np.bincount(second, weights=w[first], minlength=w.size)
+    return total
+
+
+def lookup(sorted_keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """Index of each query key in ``sorted_keys``, or -1 where absent."""
+    n = sorted_keys.shape[0]
+    queries = np.asarray(queries, dtype=np.int64)
+    if n == 0:
+        return np.full(queries.shape, -1, dtype=np.int64)
+    pos = np.minimum(np.searchsorted(sorted_keys, queries), n - 1)
+    return np.where(sorted_keys[pos] == queries, pos, -1)
