@@ -1,0 +1,205 @@
+"""ROS 1 / ROS 2 (sqlite3, mcap) bags: round trips, topic mapping, ground truth, errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clusterfilter_ros.core.frame import AVIA, MID360, Frame, Sequence, TimedPositions
+from clusterfilter_ros.errors import InputError
+from clusterfilter_ros.io.bags import (
+    bag_summary,
+    iter_bag_frames,
+    read_bag,
+    read_bag_ground_truth,
+    typestore_for,
+    write_bag,
+)
+from clusterfilter_ros.io.dataset import detect_input_kind, iter_input_frames, open_input
+
+pytest.importorskip("rosbags")
+
+T0 = 1706255621.600227
+
+
+def _sequence(n: int = 5) -> Sequence:
+    rng = np.random.default_rng(2)
+    frames = []
+    for i in range(n):
+        t = T0 + 0.1 * i
+        for sensor, count, dt in ((MID360, 60 + i, 0.0), (AVIA, i * 3, 0.004)):
+            frames.append(
+                Frame(
+                    t + dt,
+                    sensor,
+                    (rng.normal(size=(count, 3)) * 30).astype(np.float32),
+                    intensity=rng.integers(0, 255, count).astype(np.float32),
+                    point_time=np.sort(rng.random(count)) * 0.1,
+                )
+            )
+    gt = TimedPositions(T0 + 0.066 * np.arange(7), rng.normal(size=(7, 3)) * 20)
+    return Sequence("flight", frames, gt)
+
+
+def _assert_same(seq: Sequence, back: Sequence, point_time: bool = True) -> None:
+    assert [(f.sensor, len(f)) for f in back.frames] == [(f.sensor, len(f)) for f in seq.frames]
+    for a, b in zip(seq.frames, back.frames, strict=True):
+        assert b.stamp == pytest.approx(a.stamp, abs=1e-6)
+        np.testing.assert_array_equal(b.xyz, a.xyz)
+        if point_time:
+            np.testing.assert_allclose(b.point_time, a.point_time, atol=1e-6)
+            np.testing.assert_array_equal(b.intensity, a.intensity)
+    assert back.ground_truth is not None
+    np.testing.assert_allclose(back.ground_truth.stamps, seq.ground_truth.stamps, atol=1e-6)
+    np.testing.assert_array_equal(back.ground_truth.xyz, seq.ground_truth.xyz)
+
+
+@pytest.mark.parametrize(
+    "fmt, storage, lidar_msg",
+    [
+        ("rosbag2", "sqlite3", "PointCloud2"),
+        ("rosbag2", "mcap", "PointCloud2"),
+        ("rosbag1", "sqlite3", "PointCloud2"),
+        ("rosbag2", "mcap", "CustomMsg"),
+        ("rosbag1", "sqlite3", "CustomMsg"),
+    ],
+)
+def test_bag_round_trip(tmp_path: Path, fmt: str, storage: str, lidar_msg: str) -> None:
+    seq = _sequence()
+    path = tmp_path / ("out.bag" if fmt == "rosbag1" else "out")
+    written = write_bag(seq, path, fmt=fmt, storage=storage, lidar_msg=lidar_msg)
+    assert written == path and path.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+    if fmt == "rosbag2":
+        assert (path / "metadata.yaml").is_file()
+        assert list(path.glob("out*.mcap" if storage == "mcap" else "out*.db3"))
+    summary = bag_summary(path)
+    assert summary.topics["/livox/avia"].count == 5
+    assert summary.topics["/uav/ground_truth"].msgtype == "geometry_msgs/msg/PointStamped"
+    back = read_bag(path)
+    _assert_same(seq, back)
+    assert back.name == "out"
+    assert detect_input_kind(path) == ("rosbag1" if fmt == "rosbag1" else "rosbag2")
+    lazy = list(iter_input_frames(path))
+    assert [(f.stamp, f.sensor) for f in lazy] == [(f.stamp, f.sensor) for f in back.frames]
+
+
+def test_bare_storage_files_and_open_input(tmp_path: Path) -> None:
+    seq = _sequence(3)
+    write_bag(seq, tmp_path / "b", storage="mcap")
+    mcap = next((tmp_path / "b").glob("*.mcap"))
+    assert detect_input_kind(mcap) == "rosbag2"
+    _assert_same(seq, open_input(mcap))
+    only_mid = open_input(tmp_path / "b", sensors=[MID360])
+    assert {f.sensor for f in only_mid.frames} == {MID360}
+
+
+def test_custom_topics_and_mapping(tmp_path: Path) -> None:
+    seq = _sequence(3)
+    topics = {AVIA: "/sensor_a/points", MID360: "/livox/lidar_192_168_1_3"}
+    write_bag(seq, tmp_path / "b", topics=topics, ground_truth_topic="/leica/position")
+    with pytest.raises(InputError, match="cannot tell which sensor .*/sensor_a/points") as info:
+        read_bag(tmp_path / "b")
+    assert "\n" not in str(info.value)
+    mapping = {"/sensor_a/points": AVIA, "/livox/lidar_192_168_1_3": MID360}
+    back = read_bag(tmp_path / "b", topics=mapping, ground_truth_topic="/leica/position")
+    _assert_same(seq, back)
+    # default GT topic absent: no ground truth, not an error
+    assert read_bag(tmp_path / "b", topics=mapping).ground_truth is None
+    gt = read_bag_ground_truth(tmp_path / "b", "/leica/position")
+    np.testing.assert_array_equal(gt.xyz, seq.ground_truth.xyz)
+
+
+def test_unknown_topic_lists_topics(tmp_path: Path) -> None:
+    write_bag(_sequence(2), tmp_path / "b")
+    with pytest.raises(InputError, match=r"no topic /nope; the bag has: .*/livox/avia") as info:
+        read_bag(tmp_path / "b", topics={"/nope": AVIA})
+    assert str(tmp_path / "b") in str(info.value)
+    with pytest.raises(InputError, match="no ground-truth topic /gt"):
+        read_bag(tmp_path / "b", ground_truth_topic="/gt")
+    with pytest.raises(InputError, match="not PointCloud2"):
+        read_bag(tmp_path / "b", topics={"/uav/ground_truth": AVIA})
+
+
+def test_pose_stamped_ground_truth(tmp_path: Path) -> None:
+    """Ground truth as PoseStamped in a bag written with the raw rosbags API."""
+    from rosbags.rosbag2 import Writer
+
+    store = typestore_for(2)
+    types = store.types
+    path = tmp_path / "pose"
+    seq = _sequence(2)
+    write_bag(seq, tmp_path / "lidar", ground_truth_topic=None)
+    with Writer(path, version=9) as writer:
+        conn = writer.add_connection(
+            "/uav/ground_truth", "geometry_msgs/msg/PoseStamped", typestore=store
+        )
+        for i, (t, p) in enumerate(zip(seq.ground_truth.stamps, seq.ground_truth.xyz, strict=True)):
+            sec, nsec = int(t), int(round((t - int(t)) * 1e9))
+            header = types["std_msgs/msg/Header"](
+                stamp=types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id="map"
+            )
+            pose = types["geometry_msgs/msg/Pose"](
+                position=types["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                orientation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            )
+            msg = types["geometry_msgs/msg/PoseStamped"](header=header, pose=pose)
+            writer.write(
+                conn, 1000 + i, bytes(store.serialize_cdr(msg, "geometry_msgs/msg/PoseStamped"))
+            )
+    gt = read_bag_ground_truth(path)
+    np.testing.assert_allclose(gt.stamps, seq.ground_truth.stamps, atol=1e-6)
+    np.testing.assert_array_equal(gt.xyz, seq.ground_truth.xyz)
+    with pytest.raises(InputError, match="no PointCloud2 or Livox CustomMsg topic"):
+        read_bag(path)
+
+
+def test_lazy_reading_is_lazy_and_ordered(tmp_path: Path) -> None:
+    seq = _sequence(6)
+    write_bag(seq, tmp_path / "b.bag", fmt="rosbag1")
+    it = iter_bag_frames(tmp_path / "b.bag", sensors=[AVIA])
+    first = next(it)
+    assert first.sensor == AVIA and first.stamp == pytest.approx(T0 + 0.004, abs=1e-6)
+    rest = list(it)
+    assert len(rest) == 5 and all(a.stamp < b.stamp for a, b in zip(rest, rest[1:], strict=False))
+
+
+def test_existing_output_refused(tmp_path: Path) -> None:
+    write_bag(_sequence(1), tmp_path / "b")
+    with pytest.raises(InputError, match="already exists"):
+        write_bag(_sequence(1), tmp_path / "b")
+    write_bag(_sequence(2), tmp_path / "b", overwrite=True)
+    assert bag_summary(tmp_path / "b").topics["/livox/mid360"].count == 2
+    write_bag(_sequence(1), tmp_path / "c.bag", fmt="rosbag1")
+    with pytest.raises(InputError, match="already exists"):
+        write_bag(_sequence(1), tmp_path / "c.bag", fmt="rosbag1")
+
+
+@pytest.mark.parametrize("kind", ["sqlite3", "mcap", "rosbag1"])
+def test_truncated_bags_give_one_line_errors(tmp_path: Path, kind: str) -> None:
+    seq = _sequence(8)
+    if kind == "rosbag1":
+        path = write_bag(seq, tmp_path / "t.bag", fmt="rosbag1")
+        victim = path
+    else:
+        path = write_bag(seq, tmp_path / "t", storage=kind)
+        victim = next(path.glob("*.mcap" if kind == "mcap" else "*.db3"))
+    data = victim.read_bytes()
+    victim.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError) as info:
+        read_bag(path)
+    message = str(info.value)
+    assert str(path) in message and "\n" not in message
+
+
+def test_garbage_and_missing(tmp_path: Path) -> None:
+    (tmp_path / "g.bag").write_bytes(b"#ROSBAG V2.0\n" + b"\x00" * 50)
+    with pytest.raises(InputError, match="g.bag"):
+        read_bag(tmp_path / "g.bag")
+    (tmp_path / "g.db3").write_bytes(b"this is not sqlite")
+    with pytest.raises(InputError, match="g.db3"):
+        open_input(tmp_path / "g.db3")
+    with pytest.raises(InputError, match="no such"):
+        read_bag(tmp_path / "missing.bag")
