@@ -11,9 +11,10 @@ silent, a frame is released anyway after ``sync_timeout`` seconds of wall clock.
 Each lidar's own messages are assumed to arrive in stamp order (one DDS writer per
 topic). A stamp earlier than the same lidar's previous one by more than
 ``backwards_tolerance`` (a looped bag, a restarted driver) starts a new *generation*:
-the buffers are cleared and the consumer is expected to reset its state. Smaller steps
-back, duplicates, and frames arriving after a later frame was already released are
-dropped and counted.
+the buffers are cleared and the consumer is expected to reset its state. The other
+lidars' frames still in flight from before the jump (stamps not yet jumped back) are
+dropped until their stamps jump back too. Smaller steps back, duplicates, and frames
+arriving after a later frame was already released are dropped and counted.
 """
 
 from __future__ import annotations
@@ -85,42 +86,57 @@ class StampMerger:
         }
         self._last_received: dict[str, float] = {}
         self._last_released: tuple[float, str] | None = None
+        # lidar -> its last stamp before another lidar's jump back (see add()).
+        self._awaiting_jump: dict[str, float] = {}
 
     def __len__(self) -> int:
         return sum(len(q) for q in self._queues.values())
 
     def clear(self) -> None:
-        """Forget every queued frame and every stamp seen (start of a new generation)."""
+        """Forget every queued frame and every stamp seen."""
         for q in self._queues.values():
             q.clear()
         self._last_received.clear()
+        self._awaiting_jump.clear()
         self._last_released = None
+
+    def _drop_late(self, sensor: str) -> AddResult:
+        self.counts.late += 1
+        self.counts.per_sensor_late[sensor] = self.counts.per_sensor_late.get(sensor, 0) + 1
+        return AddResult.LATE
 
     def add(self, frame: Frame, now: float) -> AddResult:
         """Queue ``frame`` received at wall-clock time ``now`` (seconds, monotonic)."""
         sensor, stamp = frame.sensor, frame.stamp
+        tol = self.backwards_tolerance
         result = AddResult.QUEUED
+        if sensor in self._awaiting_jump:
+            # Another lidar jumped back; this one's frames still in flight from before
+            # the jump are stale until its own stamps jump back too.
+            if stamp >= self._awaiting_jump[sensor] - tol:
+                return self._drop_late(sensor)
+            del self._awaiting_jump[sensor]
         last = self._last_received.get(sensor)
         released = self._last_released
-        jumped_back = (last is not None and stamp < last - self.backwards_tolerance) or (
-            released is not None and stamp < released[0] - self.backwards_tolerance
+        jumped_back = (last is not None and stamp < last - tol) or (
+            released is not None and stamp < released[0] - tol
         )
         if jumped_back:
+            previous = dict(self._last_received)
             self.clear()
+            self._awaiting_jump = {s: t for s, t in previous.items() if s != sensor}
             self.generation += 1
             self.counts.resets += 1
             result = AddResult.RESET
         elif (last is not None and stamp <= last) or (
             released is not None and (stamp, sensor) <= released
         ):
-            self.counts.late += 1
-            self.counts.per_sensor_late[sensor] = self.counts.per_sensor_late.get(sensor, 0) + 1
-            return AddResult.LATE
+            return self._drop_late(sensor)
         self._queues.setdefault(sensor, collections.deque()).append((frame, now))
         self._last_received[sensor] = stamp
         if len(self) > self.max_queue:
             oldest = min((q[0][0].stamp, s) for s, q in self._queues.items() if q)
-            dropped, _ = self._queues[oldest[1]].popleft()
+            self._queues[oldest[1]].popleft()
             self.counts.overflow += 1
             # Nothing earlier than the dropped frame may be released after it.
             self._last_released = max(self._last_released or oldest, oldest)

@@ -73,3 +73,20 @@ def test_overflow_drops_oldest():
     assert merger.counts.overflow == 1
     out = merger.pop_ready(now=100.0)
     assert [m.frame.stamp for m in out] == [2.0, 3.0, 4.0]
+
+
+def test_loop_with_other_lidar_tail_in_flight_resets_once():
+    merger = StampMerger(SENSORS, sync_timeout=10.0, backwards_tolerance=0.5)
+    merger.add(frame("avia", 101.9), now=0.0)
+    merger.add(frame("mid360", 101.85), now=0.0)
+    merger.pop_ready(now=0.0)
+    assert merger.add(frame("avia", 100.0), now=0.0) is AddResult.RESET
+    # mid360's last frame of the first pass arrives after avia looped: stale, dropped
+    assert merger.add(frame("mid360", 101.95), now=0.0) is AddResult.LATE
+    assert merger.add(frame("mid360", 100.0), now=0.0) is AddResult.QUEUED
+    assert merger.counts.resets == 1
+    out = merger.pop_ready(now=0.0)
+    assert [(m.frame.stamp, m.frame.sensor, m.generation) for m in out] == [
+        (100.0, "avia", 1),
+        (100.0, "mid360", 1),
+    ]

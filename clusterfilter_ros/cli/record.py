@@ -1,0 +1,102 @@
+"""``clusterfilter record``: record /uav/pose into a CSV (and a ROS 2 bag) for the evaluator."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from clusterfilter_ros.errors import ClusterfilterError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "record",
+        help="record the detector's /uav/pose into timestamp,x,y,z CSV (and a bag)",
+        description="Subscribe to /uav/pose and write every pose received as a "
+        "timestamp,x,y,z CSV (atomically) when stopped: after --duration, after "
+        "--until-idle seconds without a pose, or on Ctrl-C/SIGTERM.",
+    )
+    p.add_argument("output", help="CSV file to write")
+    p.add_argument("--bag", help="also write a ROS 2 bag (sqlite3) folder with the messages")
+    p.add_argument("--points", help="also write the drone points of /uav/points as .npy")
+    p.add_argument("--topic", default="/uav/pose", help="PoseStamped topic (default %(default)s)")
+    p.add_argument("--points-topic", default="/uav/points", help="PointCloud2 topic for --points")
+    stop = p.add_mutually_exclusive_group()
+    stop.add_argument("--duration", type=float, help="stop after this many seconds")
+    stop.add_argument(
+        "--until-idle",
+        type=float,
+        metavar="S",
+        help="stop once S seconds pass without a pose (counted from the first pose)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        help="with --until-idle: give up after this many seconds if no pose ever comes",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    for name in ("duration", "until_idle", "timeout"):
+        value = getattr(args, name)
+        if value is not None and not value > 0:
+            raise ClusterfilterError(f"--{name.replace('_', '-')} must be > 0, got {value}")
+    from pathlib import Path
+
+    if args.bag and Path(args.bag).exists():
+        raise ClusterfilterError(f"bag {args.bag} already exists; choose a new folder")
+    from clusterfilter_ros.dds import apply_loopback_defaults
+
+    apply_loopback_defaults()
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    from clusterfilter_ros.ros.record import PoseRecorder
+
+    rclpy.init(args=["clusterfilter-record"])
+    node = rclpy.create_node("clusterfilter_record")
+    recorder = PoseRecorder(
+        node,
+        pose_topic=args.topic,
+        points_topic=args.points_topic if args.points else None,
+        keep_messages=bool(args.bag),
+    )
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    started = time.monotonic()
+    reason = "stopped"
+    print(f"record: recording {args.topic} ...", flush=True)
+    try:
+        while True:
+            executor.spin_once(timeout_sec=0.1)
+            now = time.monotonic()
+            if args.duration is not None and now - started >= args.duration:
+                reason = f"{args.duration:g} s elapsed"
+                break
+            if args.until_idle is not None:
+                idle = recorder.idle_for(now)
+                if idle is not None and idle >= args.until_idle:
+                    reason = f"no pose for {args.until_idle:g} s"
+                    break
+                if idle is None and args.timeout is not None and now - started >= args.timeout:
+                    reason = f"no pose within {args.timeout:g} s"
+                    break
+    except (KeyboardInterrupt, ExternalShutdownException):
+        reason = "interrupted"
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        written = [str(recorder.write_csv(args.output))]
+        if args.points:
+            written.append(str(recorder.write_points(args.points)))
+        if args.bag:
+            written.append(str(recorder.write_bag(args.bag)))
+        n = len(recorder)
+        recorder.destroy()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print(f"record: {reason}; {n} poses written to {', '.join(written)}", flush=True)
+    if n == 0:
+        print(f"record: warning: no message arrived on {args.topic}", file=sys.stderr)
+    return 0

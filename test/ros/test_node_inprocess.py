@@ -1,0 +1,178 @@
+"""The detector node in-process: poses, equality with run_streaming, parameters,
+diagnostics, looped stamps, malformed clouds (one rclpy context, loopback DDS)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+
+from clusterfilter_ros.core.params import detector_params  # noqa: E402
+from clusterfilter_ros.core.streaming import run_streaming  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+
+def replay_and_wait(rig, frames, expected_frames, wait_for, timeout=60.0, rate=0.0):
+    assert rig.replayer.wait_for_subscribers(10.0, ["/uav/pose"], settle=0.3)
+    stats = rig.replayer.play(frames, rate=rate)
+    assert wait_for(
+        lambda: sum(rig.detector.counters()["received"].values()) >= expected_frames, timeout
+    ), rig.detector.counters()
+    assert rig.detector.wait_until_idle(timeout)
+    return stats
+
+
+def on_the_wire(frames):
+    """The frames as the node decodes them: livox PointCloud2 and back (stamps in ns)."""
+    from clusterfilter_ros.io.pointcloud2 import make_pointcloud2, pointcloud2_to_frame
+
+    return [pointcloud2_to_frame(make_pointcloud2(f, f.sensor), f.sensor) for f in frames]
+
+
+def test_node_poses_equal_run_streaming(make_rig, small_sequence, wait_for):
+    frames = small_sequence.frames
+    expected = run_streaming(on_the_wire(frames), detector_params())
+    assert len(expected) > 50
+    rig = make_rig(qos_depth=1000, max_queue=1000)
+    replay_and_wait(rig, frames, len(frames), wait_for)
+    counters = rig.detector.counters()
+    assert counters["processed"] == len(frames), counters
+    assert counters["released_by_timeout"] <= 1  # only the very last frame may wait
+    assert wait_for(lambda: len(rig.recorder) >= len(expected), 10.0)
+    got = rig.recorder.positions()
+    assert len(got) == len(expected)
+    # Same frames, same order, same core: identical poses.
+    np.testing.assert_array_equal(got.xyz, np.array([e.position for e in expected]))
+    np.testing.assert_allclose(got.stamps, [e.stamp for e in expected], rtol=0, atol=1e-9)
+    # Against the original float stamps (before nanosecond rounding) only rounding differs.
+    original = run_streaming(frames, detector_params())
+    assert len(original) == len(got)
+    np.testing.assert_allclose(got.xyz, [e.position for e in original], rtol=0, atol=1e-9)
+    assert rig.recorder.drone_points().shape[0] > 0
+
+
+def test_extrinsic_moves_poses(make_rig, small_sequence, wait_for):
+    frames = small_sequence.frames[:60]
+    shift = [5.0, -3.0, 1.0]
+    rig = make_rig(
+        qos_depth=1000,
+        max_queue=1000,
+        avia_extrinsic=shift + [0.0, 0.0, 0.0, 1.0],
+        mid360_extrinsic=shift + [0.0, 0.0, 0.0, 1.0],
+        mid360_min_z=4.5,  # the ground moved up by 1 m with the shift
+    )
+    replay_and_wait(rig, frames, len(frames), wait_for)
+    shifted = [
+        dataclasses.replace(f, xyz=(f.xyz.astype(np.float64) + shift).astype(np.float32))
+        for f in frames
+    ]
+    expected = run_streaming(shifted, detector_params({"mid360_min_z": 4.5}))
+    assert wait_for(lambda: len(rig.recorder) >= len(expected), 10.0)
+    got = rig.recorder.positions()
+    assert len(got) == len(expected) > 0
+    np.testing.assert_allclose(got.xyz, [e.position for e in expected], atol=1e-6)
+
+
+def test_backwards_stamp_resets_state(make_rig, small_sequence, wait_for):
+    frames = small_sequence.frames[:40]
+    rig = make_rig(qos_depth=1000, max_queue=1000)
+    first = len(run_streaming(on_the_wire(frames), detector_params()))
+    assert first > 0
+    replay_and_wait(rig, frames, len(frames), wait_for)
+    assert wait_for(lambda: len(rig.recorder) >= first, 10.0)
+    rig.replayer.play(frames, rate=0.0)  # the bag loops: stamps jump back 2 s
+    assert wait_for(lambda: sum(rig.detector.counters()["received"].values()) >= 80, 30.0)
+    assert rig.detector.wait_until_idle(30.0)
+    counters = rig.detector.counters()
+    assert counters["resets"] == 1
+    assert counters["processed"] == 2 * len(frames)
+    # After the reset the second pass gives exactly the first pass's poses again.
+    assert wait_for(lambda: len(rig.recorder) >= 2 * first, 10.0)
+    poses = rig.recorder.positions()
+    assert len(poses) == 2 * first
+    rows = np.column_stack([poses.stamps, poses.xyz])
+    rows = rows[np.lexsort(rows.T[::-1])]  # every (stamp, x, y, z) must appear twice
+    np.testing.assert_array_equal(rows[0::2], rows[1::2])
+
+
+def test_runtime_parameters_validated(make_rig):
+    from rclpy.parameter import Parameter
+
+    rig = make_rig()
+    node = rig.detector
+    ok = node.set_parameters([Parameter("eps", value=1.5), Parameter("frame_id", value="world")])
+    assert all(r.successful for r in ok)
+    assert node.get_parameter("eps").value == 1.5
+    assert node._detector.params.eps == 1.5
+    bad = node.set_parameters([Parameter("eps", value=-1.0)])[0]
+    assert not bad.successful and "eps" in bad.reason
+    assert node.get_parameter("eps").value == 1.5
+    zero_q = node.set_parameters([Parameter("avia_extrinsic", value=[0.0] * 7)])[0]
+    assert not zero_q.successful and "quaternion" in zero_q.reason
+    short = node.set_parameters([Parameter("target_offset", value=[1.0, 2.0])])[0]
+    assert not short.successful and "3 values" in short.reason
+    topic = node.set_parameters([Parameter("avia_topic", value="/other")])[0]
+    assert not topic.successful
+    wrong_type = node.set_parameters([Parameter("min_samples", value=2.5)])[0]
+    assert not wrong_type.successful
+
+
+def test_invalid_start_parameter_is_a_parameter_error(rclpy_context):
+    from rclpy.parameter import Parameter
+
+    from clusterfilter_ros.errors import ParameterError
+    from clusterfilter_ros.ros.node import DetectorNode
+
+    with pytest.raises(ParameterError, match="eps"):
+        DetectorNode(context=rclpy_context, parameter_overrides=[Parameter("eps", value=100.0)])
+    with pytest.raises(ParameterError, match="mid360_extrinsic"):
+        DetectorNode(
+            context=rclpy_context,
+            parameter_overrides=[Parameter("mid360_extrinsic", value=[0.0] * 7)],
+        )
+
+
+def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_for):
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    rig = make_rig(diagnostics_period=0.2, stale_timeout=0.5, qos_depth=100)
+
+    def detector_status():
+        return rig.detector.diagnostics().status[0]
+
+    assert detector_status().level == DiagnosticStatus.STALE  # nothing received yet
+    assert wait_for(lambda: len(rig.diagnostics) >= 2, 5.0)
+    assert rig.replayer.wait_for_subscribers(10.0, settle=0.3)
+    avia_only = [f for f in small_sequence.frames if f.sensor == "avia"][:5]
+    rig.replayer.play(avia_only, rate=0.0)
+    assert wait_for(lambda: rig.detector.counters()["received"]["avia"] == 5, 10.0)
+    status = detector_status()
+    assert status.level == DiagnosticStatus.WARN and "mid360" in status.message
+    rig.replayer.play(small_sequence.frames[10:20], rate=0.0)
+    assert wait_for(lambda: rig.detector.counters()["received"]["mid360"] >= 5, 10.0)
+    rig.detector.wait_until_idle(10.0)
+    status = detector_status()
+    assert status.level == DiagnosticStatus.OK, status
+    values = {kv.key: kv.value for kv in status.values}
+    assert float(values["processing_ms_mean"]) > 0
+    assert "detector_accumulator_voxels" in values
+
+    # A cloud whose bytes are shorter than width * point_step: rejected, counted, no crash.
+    bad = PointCloud2(height=1, width=100, point_step=12, row_step=1200, is_dense=True)
+    bad.fields = [
+        PointField(name=n, offset=4 * i, datatype=7, count=1) for i, n in enumerate("xyz")
+    ]
+    bad.data = bytes(60)
+    bad.header.stamp.sec = 500
+    rig.replayer.publishers["avia"].publish(bad)
+    assert wait_for(lambda: rig.detector.counters()["rejected"]["avia"] == 1, 10.0)
+    statuses = {s.name.split(": ")[-1]: s for s in rig.detector.diagnostics().status}
+    assert statuses["avia input"].level in (DiagnosticStatus.WARN, DiagnosticStatus.ERROR)
+    assert {kv.key: kv.value for kv in statuses["avia input"].values}["rejected_malformed"] == "1"
+    # Silence: both inputs stale after stale_timeout.
+    assert wait_for(lambda: detector_status().level == DiagnosticStatus.STALE, 5.0)
