@@ -336,6 +336,18 @@ def _iter_frames(
         yield heapq.heappop(pending)[3]
 
 
+def count_bag_frames(
+    path: str | os.PathLike[str],
+    topics: Mapping[str, str] | None = None,
+    sensors: Iterable[str] | None = None,
+) -> int:
+    """Number of lidar messages :func:`iter_bag_frames` would decode (from the index)."""
+    with _OpenBag(path) as bag:
+        mapping = _resolve_lidar_topics(bag, topics, sensors)
+        summary = bag.summary()
+    return sum(summary.topics[t].count for t in mapping)
+
+
 def iter_bag_frames(
     path: str | os.PathLike[str],
     topics: Mapping[str, str] | None = None,
@@ -485,24 +497,33 @@ class _MessageBuilder:
         return self.serialize(msg, "geometry_msgs/msg/PointStamped")
 
 
-def _records(
-    seq: Sequence, topics: Mapping[str, str], gt_topic: str | None
-) -> list[tuple[float, int, str, Any]]:
-    """(stamp, tiebreak, topic, payload) for every message, in time order."""
-    missing = sorted({f.sensor for f in seq.frames} - set(topics))
-    if missing:
-        raise InputError(
-            f"no bag topic for sensor(s) {', '.join(missing)}; give topics={{sensor: topic}}"
-        )
-    records: list[tuple[float, int, str, Any]] = [
-        (f.stamp, i, topics[f.sensor], f) for i, f in enumerate(seq.frames)
-    ]
-    if gt_topic and seq.ground_truth is not None:
-        offset = len(records)
-        gt = seq.ground_truth
-        records += [(float(t), offset + i, gt_topic, gt.xyz[i]) for i, t in enumerate(gt.stamps)]
-    records.sort(key=lambda r: (r[0], r[1]))
-    return records
+def _messages(
+    frames: Iterable[Frame],
+    ground_truth: TimedPositions | None,
+    topics: Mapping[str, str],
+    gt_topic: str | None,
+) -> Iterator[tuple[float, str, Frame | np.ndarray]]:
+    """(stamp, topic, frame or GT position) for every message, merged in time order.
+
+    ``frames`` must be time-ordered (as every reader here yields them); ground truth
+    positions are merged in between without holding the frames in memory.
+    """
+
+    def lidar() -> Iterator[tuple[float, int, str, Frame | np.ndarray]]:
+        for frame in frames:
+            topic = topics.get(frame.sensor)
+            if topic is None:
+                raise InputError(
+                    f"no bag topic for sensor {frame.sensor!r}; give topics={{sensor: topic}}"
+                )
+            yield frame.stamp, 1, topic, frame
+
+    streams = [lidar()]
+    if gt_topic and ground_truth is not None and len(ground_truth):
+        gt = ground_truth
+        streams.append((float(t), 0, gt_topic, gt.xyz[i]) for i, t in enumerate(gt.stamps))
+    for stamp, _, topic, payload in heapq.merge(*streams, key=lambda r: (r[0], r[1])):
+        yield stamp, topic, payload
 
 
 def write_bag(
@@ -529,10 +550,42 @@ def write_bag(
         layout: PointCloud2 field layout (``livox``, ``xyz``, ``xyzi``).
         lidar_msg: ``"PointCloud2"`` or ``"CustomMsg"`` (livox_ros_driver2).
         overwrite: replace an existing output.
-        progress: optional callable taking the number of messages just written.
+        progress: optional callable taking the number of lidar frames just written.
 
     The bag is written under a temporary name and moved into place when complete.
     """
+    frames = sorted(seq.frames, key=lambda f: (f.stamp, f.sensor))
+    return write_bag_frames(
+        frames,
+        path,
+        ground_truth=seq.ground_truth,
+        fmt=fmt,
+        storage=storage,
+        topics=topics,
+        ground_truth_topic=ground_truth_topic,
+        frame_id=frame_id,
+        layout=layout,
+        lidar_msg=lidar_msg,
+        overwrite=overwrite,
+        progress=progress,
+    )
+
+
+def write_bag_frames(
+    frames: Iterable[Frame],
+    path: str | os.PathLike[str],
+    ground_truth: TimedPositions | None = None,
+    fmt: str = "rosbag2",
+    storage: str = "sqlite3",
+    topics: Mapping[str, str] | None = None,
+    ground_truth_topic: str | None = DEFAULT_GROUND_TRUTH_TOPIC,
+    frame_id: str = "livox_frame",
+    layout: str = "livox",
+    lidar_msg: str = "PointCloud2",
+    overwrite: bool = False,
+    progress: Any = None,
+) -> Path:
+    """Like :func:`write_bag` for a time-ordered stream of frames (constant memory)."""
     if fmt not in ("rosbag2", "rosbag1"):
         raise InputError(f"unknown bag format {fmt!r}; choose rosbag2 or rosbag1")
     if storage not in ("sqlite3", "mcap"):
@@ -540,87 +593,49 @@ def write_bag(
     if lidar_msg not in ("PointCloud2", "CustomMsg"):
         raise InputError(f"unknown lidar message {lidar_msg!r}; choose PointCloud2 or CustomMsg")
     topic_of = dict(DEFAULT_TOPICS if topics is None else topics)
-    records = _records(seq, topic_of, ground_truth_topic)
+    if ground_truth_topic and ground_truth_topic in topic_of.values():
+        raise InputError(f"ground-truth topic {ground_truth_topic} is also a lidar topic")
+    messages = _messages(frames, ground_truth, topic_of, ground_truth_topic)
     builder = _MessageBuilder(1 if fmt == "rosbag1" else 2, frame_id, layout, lidar_msg)
     target = Path(path)
     if fmt == "rosbag1":
+        from rosbags.rosbag1 import Writer as Ros1Writer
+
         if target.exists() and not overwrite:
             raise InputError(f"output {target} already exists (choose another path or remove it)")
         with atomic_output_path(target, suffix=".bag") as tmp:
             tmp.unlink()
-            _write_ros1(tmp, builder, records, topic_of, ground_truth_topic, progress)
+            with Ros1Writer(tmp) as writer:
+                _write_messages(writer, builder, messages, progress)
         return target
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     with atomic_output_dir(target, overwrite=overwrite) as tmp:
         inner = tmp / target.name  # rosbags names the storage file after the folder
-        _write_ros2(inner, storage, builder, records, topic_of, ground_truth_topic, progress)
+        with Writer(inner, version=Writer.VERSION_LATEST, storage_plugin=plugin) as writer:
+            _write_messages(writer, builder, messages, progress)
         for item in inner.iterdir():
             os.rename(item, tmp / item.name)
         inner.rmdir()
     return target
 
 
-def _used_topics(records: list[tuple[float, int, str, Any]]) -> list[str]:
-    return list(dict.fromkeys(r[2] for r in records))
-
-
 def _write_messages(
     writer: Any,
-    connections: Mapping[str, Any],
     builder: _MessageBuilder,
-    records: list[tuple[float, int, str, Any]],
-    gt_topic: str | None,
+    messages: Iterable[tuple[float, str, Frame | np.ndarray]],
     progress: Any,
 ) -> None:
-    for stamp, _, topic, payload in records:
-        if topic == gt_topic and not isinstance(payload, Frame):
-            data = builder.point(stamp, payload)
-        else:
-            data = builder.lidar(payload)
+    """Serialise and write every message, adding each topic's connection on first use."""
+    connections: dict[str, Any] = {}
+    for stamp, topic, payload in messages:
+        is_frame = isinstance(payload, Frame)
+        if topic not in connections:
+            msgtype = builder.lidar_type if is_frame else "geometry_msgs/msg/PointStamped"
+            connections[topic] = writer.add_connection(topic, msgtype, typestore=builder.store)
+        data = builder.lidar(payload) if is_frame else builder.point(stamp, payload)
         sec, nanosec = seconds_to_stamp(stamp)
         writer.write(connections[topic], sec * 1_000_000_000 + nanosec, data)
-        if progress is not None:
+        if progress is not None and is_frame:
             progress(1)
-
-
-def _write_ros2(
-    path: Path,
-    storage: str,
-    builder: _MessageBuilder,
-    records: list[tuple[float, int, str, Any]],
-    topic_of: Mapping[str, str],
-    gt_topic: str | None,
-    progress: Any,
-) -> None:
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
-    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    lidar_topics = set(topic_of.values())
-    with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=plugin) as writer:
-        connections = {}
-        for topic in _used_topics(records):
-            msgtype = (
-                builder.lidar_type if topic in lidar_topics else "geometry_msgs/msg/PointStamped"
-            )
-            connections[topic] = writer.add_connection(topic, msgtype, typestore=builder.store)
-        _write_messages(writer, connections, builder, records, gt_topic, progress)
-
-
-def _write_ros1(
-    path: Path,
-    builder: _MessageBuilder,
-    records: list[tuple[float, int, str, Any]],
-    topic_of: Mapping[str, str],
-    gt_topic: str | None,
-    progress: Any,
-) -> None:
-    from rosbags.rosbag1 import Writer
-
-    lidar_topics = set(topic_of.values())
-    with Writer(path) as writer:
-        connections = {}
-        for topic in _used_topics(records):
-            msgtype = (
-                builder.lidar_type if topic in lidar_topics else "geometry_msgs/msg/PointStamped"
-            )
-            connections[topic] = writer.add_connection(topic, msgtype, typestore=builder.store)
-        _write_messages(writer, connections, builder, records, gt_topic, progress)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import heapq
 import os
 import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
 from pathlib import Path
@@ -241,19 +241,31 @@ def write_sequence_folder(
     Intensity and per-point time are not part of the format and are not written. The
     folder is built under a temporary name and renamed into place when complete.
     """
+    return write_frames_folder(seq.frames, out_dir, seq.ground_truth, pad_rows, overwrite)
+
+
+def write_frames_folder(
+    frames: Iterable[Frame],
+    out_dir: str | os.PathLike[str],
+    ground_truth: TimedPositions | None = None,
+    pad_rows: Mapping[str, int | SequenceABC[int]] | None = None,
+    overwrite: bool = False,
+    progress: Callable[[int], object] | None = None,
+) -> Path:
+    """Like :func:`write_sequence_folder` for a stream of frames (constant memory).
+
+    ``progress`` is called with 1 after each frame is written.
+    """
     target = Path(out_dir)
-    unknown = sorted({f.sensor for f in seq.frames} - set(FOLDER_OF_SENSOR))
-    if unknown:
-        raise InputError(
-            f"challenge folders only hold {', '.join(sorted(FOLDER_OF_SENSOR))} frames; "
-            f"sequence {seq.name!r} has {', '.join(unknown)}"
-        )
-    if not seq.frames:
-        raise InputError(f"sequence {seq.name!r} has no lidar frames; nothing to write to {target}")
     pads = {s: _pad_sizes(v) for s, v in (pad_rows or {}).items()}
     with atomic_output_dir(target, overwrite=overwrite) as tmp:
         counters: dict[str, int] = {}
-        for frame in seq.frames:
+        for frame in frames:
+            if frame.sensor not in FOLDER_OF_SENSOR:
+                raise InputError(
+                    f"challenge folders only hold {', '.join(sorted(FOLDER_OF_SENSOR))} frames, "
+                    f"not {frame.sensor!r}"
+                )
             folder = tmp / FOLDER_OF_SENSOR[frame.sensor]
             if frame.sensor not in counters:
                 folder.mkdir()
@@ -268,14 +280,17 @@ def write_sequence_folder(
             file = folder / f"{format_stamp(frame.stamp)}.npy"
             if file.exists():
                 raise InputError(
-                    f"two {frame.sensor} frames of {seq.name!r} share stamp "
-                    f"{format_stamp(frame.stamp)}"
+                    f"two {frame.sensor} frames share stamp {format_stamp(frame.stamp)}"
                 )
             np.save(file, data)
-        if seq.ground_truth is not None and len(seq.ground_truth):
+            if progress is not None:
+                progress(1)
+        if not counters:
+            raise InputError(f"no lidar frames to write to {target}")
+        if ground_truth is not None and len(ground_truth):
             gt_dir = tmp / GROUND_TRUTH_FOLDER
             gt_dir.mkdir()
-            for stamp, xyz in zip(seq.ground_truth.stamps, seq.ground_truth.xyz, strict=True):
+            for stamp, xyz in zip(ground_truth.stamps, ground_truth.xyz, strict=True):
                 np.save(
                     gt_dir / f"{format_stamp(float(stamp))}.npy", np.asarray(xyz, dtype=np.float64)
                 )

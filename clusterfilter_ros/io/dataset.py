@@ -16,11 +16,11 @@ Input kinds (:func:`detect_input_kind`):
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from clusterfilter_ros.core.frame import Frame, Sequence
+from clusterfilter_ros.core.frame import Frame, Sequence, TimedPositions
 from clusterfilter_ros.errors import InputError
 from clusterfilter_ros.io import challenge
 
@@ -167,4 +167,78 @@ def write_output(
         from clusterfilter_ros.io import bags
 
         return bags.write_bag(seq, path, fmt=fmt, overwrite=overwrite, **kw)
+    raise InputError(f"unknown output format {fmt!r}; choose one of {', '.join(OUTPUT_FORMATS)}")
+
+
+def read_input_ground_truth(
+    path: str | os.PathLike[str], ground_truth_topic: str | None = None
+) -> TimedPositions | None:
+    """The ground truth a recording carries (None if it has none), without its frames.
+
+    Challenge folders: ``ground_truth/``. Bags: ``ground_truth_topic`` (must exist if
+    given) or the default ``/uav/ground_truth`` (if present).
+    """
+    p = Path(path)
+    kind = detect_input_kind(p)
+    if kind == "mmaud-root":
+        open_input(p)  # raises the "pass one of them" error
+    if kind == "mmaud":
+        gt_dir = p / challenge.GROUND_TRUTH_FOLDER
+        return challenge.read_ground_truth_folder(gt_dir) if gt_dir.is_dir() else None
+    from clusterfilter_ros.io import bags
+
+    if ground_truth_topic:
+        return bags.read_bag_ground_truth(p, ground_truth_topic)
+    try:
+        return bags.read_bag_ground_truth(p)
+    except InputError as exc:
+        if "no ground-truth topic" in str(exc):
+            return None
+        raise
+
+
+def count_input_frames(
+    path: str | os.PathLike[str],
+    sensors: Iterable[str] | None = None,
+    topics: Mapping[str, str] | None = None,
+) -> int:
+    """How many lidar frames :func:`iter_input_frames` will yield (from file lists or bag
+    indexes; nothing is decoded)."""
+    p = Path(path)
+    kind = detect_input_kind(p)
+    if kind == "mmaud-root":
+        open_input(p)
+    if kind == "mmaud":
+        return len(challenge.list_lidar_files(p, sensors))
+    from clusterfilter_ros.io import bags
+
+    return bags.count_bag_frames(p, topics=topics, sensors=sensors)
+
+
+def write_output_frames(
+    frames: Iterable[Frame],
+    path: str | os.PathLike[str],
+    fmt: str = "mmaud",
+    ground_truth: TimedPositions | None = None,
+    overwrite: bool = False,
+    progress: Callable[[int], object] | None = None,
+    **kw: Any,
+) -> Path:
+    """Like :func:`write_output` for a time-ordered stream of frames (constant memory)."""
+    if fmt == "mmaud":
+        return challenge.write_frames_folder(
+            frames, path, ground_truth, overwrite=overwrite, progress=progress, **kw
+        )
+    if fmt in ("rosbag2", "rosbag1"):
+        from clusterfilter_ros.io import bags
+
+        return bags.write_bag_frames(
+            frames,
+            path,
+            ground_truth=ground_truth,
+            fmt=fmt,
+            overwrite=overwrite,
+            progress=progress,
+            **kw,
+        )
     raise InputError(f"unknown output format {fmt!r}; choose one of {', '.join(OUTPUT_FORMATS)}")
