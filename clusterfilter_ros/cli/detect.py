@@ -8,7 +8,6 @@ from pathlib import Path
 
 from clusterfilter_ros.cli._detector_args import add_detector_options, detector_params_from_args
 
-
 #: The detector does not tell drone models apart; the UG2+ Classification column says so.
 UG2_CLASSIFICATION = "unknown"
 

@@ -1,0 +1,99 @@
+"""`clusterfilter detect` and `clusterfilter evaluate` end to end on small recordings."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clusterfilter_ros.cli import main
+from clusterfilter_ros.core.frame import Sequence, TimedPositions
+from clusterfilter_ros.io.dataset import write_output
+from clusterfilter_ros.io.groundtruth import read_positions_csv
+
+_spec = importlib.util.spec_from_file_location(
+    "detector_scenes", Path(__file__).parents[1] / "core" / "conftest.py"
+)
+scenes = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(scenes)
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rec")
+    frames, tt, tx = scenes.build_scene(duration=6.0, wall_points=200)
+    gt = TimedPositions(tt[::3], tx[::3])
+    seq = Sequence("flight", frames, gt)
+    write_output(seq, root / "mmaud" / "flight", fmt="mmaud")
+    write_output(seq, root / "bag2", fmt="rosbag2")
+    quiet, _, _ = scenes.build_scene(duration=6.0, drone=False, seed=5, wall_points=200)
+    write_output(Sequence("empty", quiet, None), root / "mmaud" / "empty", fmt="mmaud")
+    return root
+
+
+@pytest.mark.parametrize("mode", ["offline", "stream"])
+@pytest.mark.parametrize("source", ["mmaud/flight", "bag2"])
+def test_detect_then_evaluate(recordings, tmp_path, mode, source, capsys):
+    out = tmp_path / "pred.csv"
+    rc = main(["detect", str(recordings / source), "--mode", mode, "-o", str(out), "--quiet"])
+    assert rc == 0
+    header = out.read_text().splitlines()[0]
+    assert header == "timestamp,x,y,z,confidence,points"
+    pred = read_positions_csv(out)
+    assert len(pred) > 50
+    capsys.readouterr()
+    png = tmp_path / "eval.png"
+    gt_path = recordings / "mmaud" / "flight"
+    rc = main(["evaluate", str(out), str(gt_path), "--json", "--plot", str(png)])
+    assert rc == 0
+    metrics = json.loads(capsys.readouterr().out)
+    assert metrics["rmse"] < 0.6
+    assert metrics["detection_rate"] > (0.9 if mode == "offline" else 0.6)
+    assert png.stat().st_size > 10_000
+
+
+def test_ug2_format_over_a_folder_of_sequences(recordings, tmp_path):
+    out = tmp_path / "results.csv"
+    rc = main(["detect", str(recordings / "mmaud"), "--format", "ug2", "-o", str(out), "--quiet"])
+    assert rc == 0
+    lines = out.read_text().splitlines()
+    assert lines[0] == "Sequence,Timestamp,Position,Classification"
+    names = {line.split(",")[0] for line in lines[1:]}
+    assert names == {"flight"}  # the drone-free sequence yields no rows
+    first = lines[1].split(",", 2)[2]
+    xyz = json.loads(first.rsplit(",", 1)[0].strip('"'))
+    assert len(xyz) == 3
+
+
+def test_timestamps_and_params(recordings, tmp_path):
+    stamps = tmp_path / "stamps.csv"
+    stamps.write_text("timestamp\n1001.0\n1002.5\n1050.0\n")
+    out = tmp_path / "at.csv"
+    args = ["detect", str(recordings / "mmaud" / "flight"), "-o", str(out), "--quiet"]
+    assert main([*args, "--timestamps", str(stamps), "--param", "target_offset=[0,0,1]"]) == 0
+    pred = read_positions_csv(out)
+    assert pred.stamps.tolist() == [1001.0, 1002.5]
+    truth = scenes.drone_path(pred.stamps - 1000.0)
+    assert np.all(np.abs(pred.xyz[:, 2] - truth[:, 2] - 1.0) < 0.5)
+    stream_out = tmp_path / "at_stream.csv"
+    args = ["detect", str(recordings / "mmaud" / "flight"), "-o", str(stream_out), "--quiet"]
+    assert main([*args, "--mode", "stream", "--timestamps", str(stamps)]) == 0
+    assert read_positions_csv(stream_out).stamps.tolist() == [1002.5]  # warm-up before
+
+
+def test_drone_free_evaluation_and_user_errors(recordings, tmp_path, capsys):
+    out = tmp_path / "none.csv"
+    seq = recordings / "mmaud" / "empty"
+    assert main(["detect", str(seq), "-o", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(out), str(seq), "--json"]) == 0
+    metrics = json.loads(capsys.readouterr().out)
+    assert metrics["false_alarm_seconds"] == 0.0 and metrics["n_gt"] == 0
+    assert main(["detect", str(seq), "-o", str(out), "--param", "eps=-3"]) == 2
+    assert "eps" in capsys.readouterr().err
+    assert main(["detect", str(tmp_path / "missing"), "-o", str(out)]) == 2
+    assert main(["detect", str(recordings / "mmaud"), "-o", str(out)]) == 2  # csv needs one
+    assert main(["evaluate", str(tmp_path / "missing.csv"), str(seq)]) == 2

@@ -1,0 +1,68 @@
+"""Offline detection on hand-made scenes: the moving blob wins, a drone-free scene is quiet."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.frame import MID360, Frame
+from clusterfilter_ros.core.offline import detect_offline
+from clusterfilter_ros.core.params import detector_params
+
+
+def rmse(est, path) -> float:
+    truth = path(est.stamps - 1000.0)
+    return float(np.sqrt(np.mean(np.sum((est.xyz - truth) ** 2, axis=1))))
+
+
+def test_wall_and_moving_drone_the_drone_wins(scene, drone_path_fn):
+    frames, _, _ = scene(duration=8.0, wall_points=400)
+    res = detect_offline(frames)
+    assert res.trajectory is not None and len(res.selected) == 1
+    best = res.clusters[res.selected[0]]
+    assert best["cz"] > 15 and best["confidence"] > 0.8
+    stamps = np.unique([f.stamp for f in frames])
+    assert len(res.estimates) == stamps.size
+    assert rmse(res.estimates, drone_path_fn) < 0.5
+    assert set(res.estimates.extra) == {"confidence", "points"}
+    assert res.drone_points.shape[1] == 4
+    d = np.linalg.norm(
+        res.drone_points[:, 1:] - drone_path_fn(res.drone_points[:, 0] - 1000), axis=1
+    )
+    assert np.percentile(d, 95) < 1.0  # the selected points are the drone's
+
+
+def test_paper_scoring_and_dbscan_find_the_same_drone(scene, drone_path_fn):
+    frames, _, _ = scene(duration=4.0, wall_points=150, noise_points=10)
+    for values in ({"scoring": "paper"}, {"clustering": "dbscan"}):
+        res = detect_offline(frames, detector_params({**values, "min_cluster_points": 50}))
+        assert len(res.estimates) > 0, values
+        assert rmse(res.estimates, drone_path_fn) < 0.6, values
+
+
+def test_drone_free_scene_reports_nothing(scene):
+    frames, _, _ = scene(duration=8.0, drone=False, wall_points=400)
+    res = detect_offline(frames)
+    assert len(res.estimates) == 0 and res.trajectory is None and res.selected == []
+    assert len(res.clusters) >= 1  # the wall was clustered, then rejected
+
+
+def test_target_offset_and_requested_timestamps(scene):
+    frames, _, _ = scene(duration=6.0, wall_points=200)
+    base = detect_offline(frames)
+    params = detector_params({"target_offset": [0.0, 0.0, 0.3]})
+    query = np.array([1001.05, 1003.333, 999.0, 1100.0])
+    res = detect_offline(frames, params, timestamps=query)
+    assert res.estimates.stamps.tolist() == [1001.05, 1003.333]  # nothing outside the span
+    expected = base.trajectory(res.estimates.stamps) + [0, 0, 0.3]
+    assert np.allclose(res.estimates.xyz, expected)
+
+
+def test_empty_and_degenerate_inputs():
+    assert len(detect_offline([]).estimates) == 0
+    frames = [
+        Frame(1.0, MID360, np.empty((0, 3), np.float32)),
+        Frame(1.1, MID360, np.full((5, 3), np.nan, np.float32)),
+        Frame(1.2, MID360, np.zeros((5, 3), np.float32)),
+    ]
+    res = detect_offline(frames)
+    assert len(res.estimates) == 0 and res.drone_points.shape == (0, 4)

@@ -1,0 +1,87 @@
+"""Per-cluster features and both scoring modes on a static wall and a moving blob."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import score_clusters, select_clusters
+
+
+def wall_and_blob(seed: int = 0, frames: int = 100):
+    """Cluster 0: a static wall resampled every frame. Cluster 1: a blob moving 0.5 m/frame."""
+    rng = np.random.default_rng(seed)
+    xyz, t, lab = [], [], []
+    for i in range(frames):
+        stamp = i * 0.1
+        wall = np.column_stack(
+            [np.full(150, 30.0), rng.uniform(-5, 5, 150), rng.uniform(8, 14, 150)]
+        )
+        blob = np.array([i * 0.5 - 25, 0.0, 20.0]) + rng.normal(0, 0.1, (4, 3))
+        xyz += [wall, blob]
+        t += [np.full(150, stamp), np.full(4, stamp)]
+        lab += [np.zeros(150, int), np.ones(4, int)]
+    return np.vstack(xyz), np.concatenate(t), np.concatenate(lab)
+
+
+def test_relative_density_and_iou_separate_static_from_moving():
+    xyz, t, lab = wall_and_blob()
+    params = detector_params({"max_cluster_points": 10**7})
+    s = score_clusters(lab, xyz, t, params, n_clusters=2)
+    assert s.n_points.tolist() == [15000, 400]
+    assert s.mean_relative_density[1] > 0.8 > 0.5 > s.mean_relative_density[0]
+    assert s.mean_iou[1] < 0.05
+    assert s.mean_iou[0] > s.mean_iou[1]
+    assert s.local_extent[0] > 5 and s.local_extent[1] < 2
+    assert s.support_frames.tolist() == [100, 100]
+    for scoring in ("paper", "normalized"):
+        rank = s.rank_score(scoring)
+        assert rank[1] > rank[0], scoring
+    assert s.confidence[1] > 0.8 and s.confidence[0] < 0.5
+    assert select_clusters(s, params) == [1]
+
+
+def test_paper_score_is_the_formula():
+    xyz, t, lab = wall_and_blob(frames=40)
+    params = detector_params({"frames": [2.0], "iou_weight": 0.5})
+    s = score_clusters(lab, xyz, t, params, n_clusters=2)
+    # The blob: 20 two-frame windows of 8 points in 8 distinct voxels (R = 1 when the
+    # global cloud also has one point per voxel), and 19 consecutive pairs with IoU 0.
+    blob = lab == 1
+    from clusterfilter_ros.core import voxel
+
+    g_vox = np.unique(voxel.voxel_keys(xyz[blob], 0.2)).size
+    assert s.n_voxels[1] == g_vox
+    rho_g = 160 / g_vox
+    win = np.floor(t[blob] / 0.2 + 1e-6).astype(int)
+    keys = voxel.voxel_keys(xyz[blob], 0.2)
+    expected_dens, expected_iou = 0.0, 0.0
+    sets = []
+    for w in range(20):
+        sel = win == w
+        vox = set(keys[sel].tolist())
+        sets.append(vox)
+        expected_dens += np.exp((sel.sum() / len(vox)) / rho_g)
+    for a, b in zip(sets[:-1], sets[1:], strict=True):
+        iou = len(a & b) / len(a | b)
+        expected_iou += np.log(1 / max(iou, 0.01))
+    assert np.isclose(s.paper_score[1], expected_dens + 0.5 * expected_iou)
+
+
+def test_gates():
+    xyz, t, lab = wall_and_blob()
+    params = detector_params({"min_centroid_z": 25.0, "max_cluster_points": 10**7})
+    s = score_clusters(lab, xyz, t, params, n_clusters=2)
+    assert not s.candidate.any()
+    assert select_clusters(s, params) == []
+    s = score_clusters(lab, xyz, t, detector_params({"min_cluster_points": 500}), n_clusters=2)
+    assert not s.candidate[1]
+    s = score_clusters(lab, xyz, t, detector_params({"min_volume": 50.0}), n_clusters=2)
+    assert not s.candidate[1]
+
+
+def test_no_clusters():
+    s = score_clusters(
+        np.empty(0, int), np.empty((0, 3)), np.empty(0), detector_params(), n_clusters=0
+    )
+    assert len(s) == 0 and select_clusters(s, detector_params()) == []

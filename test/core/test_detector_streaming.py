@@ -1,0 +1,109 @@
+"""Streaming detector: accuracy, quiet without a drone, determinism, bounded state, robustness."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clusterfilter_ros.core.estimate import Estimate
+from clusterfilter_ros.core.frame import AVIA, MID360, Frame
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.streaming import StreamingDetector, run_streaming
+from clusterfilter_ros.errors import ParameterError
+
+
+def test_tracks_the_moving_drone(scene, drone_path_fn):
+    frames, _, _ = scene(duration=8.0, wall_points=400)
+    det = StreamingDetector()
+    estimates = [e for f in frames if (e := det.push(f)) is not None]
+    assert len(estimates) > 0.6 * len(frames)
+    stamps = np.array([e.stamp for e in estimates])
+    pos = np.array([e.position for e in estimates])
+    err = np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.5
+    assert all(isinstance(e, Estimate) and 0.5 <= e.confidence <= 1 for e in estimates)
+    assert all(e.n_points >= 1 for e in estimates)
+    pts = det.drone_points()
+    assert pts.dtype == np.float32 and pts.shape[1] == 3 and len(pts) > 0
+    stats = det.stats()
+    for key in ("accumulator_voxels", "accumulator_bytes", "last_recluster_ms", "frames_pushed"):
+        assert key in stats
+    assert stats["frames_pushed"] == len(frames) and stats["frames_rejected"] == 0
+
+
+def test_drone_free_stream_is_quiet(scene):
+    frames, _, _ = scene(duration=8.0, drone=False, wall_points=400)
+    assert run_streaming(frames) == []
+
+
+def test_run_streaming_equals_the_push_loop(scene):
+    frames, _, _ = scene(duration=5.0, wall_points=200)
+    det = StreamingDetector()
+    by_push = [e for f in frames if (e := det.push(f)) is not None]
+    by_run = run_streaming(frames)
+    assert len(by_push) == len(by_run) > 0
+    for a, b in zip(by_push, by_run, strict=True):
+        assert a.stamp == b.stamp and np.array_equal(a.position, b.position)
+        assert a.confidence == b.confidence and a.n_points == b.n_points
+
+
+def test_target_offset_is_applied(scene):
+    frames, _, _ = scene(duration=5.0, wall_points=200)
+    base = run_streaming(frames)
+    shifted = run_streaming(frames, detector_params({"target_offset": [1.0, -2.0, 0.5]}))
+    assert len(base) == len(shifted) > 0
+    assert np.allclose(shifted[-1].position - base[-1].position, [1.0, -2.0, 0.5])
+
+
+def test_state_stays_bounded_over_a_long_stream():
+    """60 s of a fresh random static cloud every frame: the state must plateau."""
+    rng = np.random.default_rng(0)
+    params = detector_params({"global_window": 3.0, "local_history": 1.0})
+    det = StreamingDetector(params)
+    sizes = []
+    for i in range(600):
+        xyz = rng.uniform([-30, -30, 4], [30, 30, 20], (500, 3)).astype(np.float32)
+        det.push(Frame(i * 0.1, MID360, xyz))
+        sizes.append(det.stats()["state_bytes"])
+    sizes = np.array(sizes)
+    assert sizes[300:].max() <= 1.1 * sizes[100:300].max()
+    capped = StreamingDetector(detector_params({"max_accumulator_voxels": 5000}))
+    for i in range(100):
+        xyz = rng.uniform([-30, -30, 4], [30, 30, 20], (500, 3)).astype(np.float32)
+        capped.push(Frame(i * 0.1, MID360, xyz))
+        assert capped.stats()["accumulator_voxels"] <= 5000 + 500 * 5
+
+
+def test_bad_frames_do_not_crash(scene):
+    frames, _, _ = scene(duration=4.0, wall_points=100)
+    det = StreamingDetector()
+    junk = [
+        Frame(1000.05, MID360, np.empty((0, 3), np.float32)),
+        Frame(1000.06, AVIA, np.full((10, 3), np.nan, np.float32)),
+        Frame(float("nan"), MID360, np.ones((3, 3), np.float32)),
+        Frame(1000.07, MID360, np.array([[np.inf, 0, 0], [1, 2, np.nan]], np.float32)),
+    ]
+    for f in frames[:10] + junk + frames[10:]:
+        det.push(f)
+        det.push(f)  # duplicate stamp
+    assert det.stats()["frames_rejected"] >= 2  # NaN stamp (twice)
+    old = Frame(900.0, MID360, np.ones((3, 3), np.float32))
+    assert det.push(old) is None  # far in the past: rejected, not absorbed
+
+
+def test_update_params_resets_only_when_needed(scene):
+    frames, _, _ = scene(duration=3.0, wall_points=100)
+    det = StreamingDetector()
+    for f in frames:
+        det.push(f)
+    voxels = det.stats()["accumulator_voxels"]
+    det.update_params({"min_confidence": 0.7})
+    assert det.params.min_confidence == 0.7
+    assert det.stats()["accumulator_voxels"] == voxels
+    det.update_params({"voxel_size": 0.3})
+    assert det.stats()["accumulator_voxels"] == 0
+    with pytest.raises(ParameterError):
+        det.update_params({"eps": -1.0})
+    assert det.params.voxel_size == 0.3  # a rejected update changes nothing
+    det.reset()
+    assert det.stats()["local_points"] == 0

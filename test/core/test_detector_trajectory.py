@@ -1,0 +1,64 @@
+"""The B-spline trajectory: accuracy on smooth paths, no estimate outside the evidence."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.trajectory import fit_trajectory, time_samples
+
+
+def test_time_samples_average_per_bin():
+    t = np.array([0.0, 0.0, 0.1, 0.1, 0.1])
+    xyz = np.array([[0, 0, 0], [2, 0, 0], [1, 1, 1], [1, 1, 1], [4, 4, 4]], dtype=float)
+    ts, ps, ws = time_samples(t, xyz, 0.05)
+    assert np.allclose(ts, [0.0, 0.1]) and ws.tolist() == [2, 3]
+    assert np.allclose(ps, [[1, 0, 0], [2, 2, 2]])
+
+
+def test_spline_follows_a_smooth_curve_and_respects_support():
+    rng = np.random.default_rng(0)
+    t = np.repeat(np.arange(0, 10, 0.1), 3)
+    truth = np.column_stack([3 * t, 10 * np.sin(0.3 * t), 20 + 0.5 * t])
+    traj = fit_trajectory(
+        t, truth + rng.normal(0, 0.1, truth.shape), max_gap=1.0, max_extrapolation=0.3
+    )
+    assert traj is not None and len(traj.segments) == 1
+    q = np.linspace(0.5, 9.4, 50)
+    q_truth = np.column_stack([3 * q, 10 * np.sin(0.3 * q), 20 + 0.5 * q])
+    assert np.sqrt(np.mean(np.sum((traj(q) - q_truth) ** 2, axis=1))) < 0.1
+    outside = traj(np.array([-0.5, 9.9 + 0.31, 20.0]))
+    assert np.isnan(outside).all()
+    assert np.isfinite(traj(np.array([-0.2, 10.1]))).all()  # within max_extrapolation
+
+
+def test_gaps_split_segments_and_leave_holes():
+    t = np.concatenate([np.arange(0, 3, 0.1), np.arange(6, 9, 0.1)])
+    xyz = np.column_stack([t, np.zeros_like(t), np.full_like(t, 10.0)])
+    traj = fit_trajectory(t, xyz, max_gap=1.0, max_extrapolation=0.2)
+    assert len(traj.segments) == 2
+    pos = traj(np.array([1.0, 4.5, 7.0]))
+    assert np.isfinite(pos[[0, 2]]).all() and np.isnan(pos[1]).all()
+    assert np.allclose(pos[[0, 2], 0], [1.0, 7.0], atol=0.05)
+
+
+def test_short_segments_use_line_or_constant_and_empty_gives_none():
+    assert fit_trajectory(np.empty(0), np.empty((0, 3)), max_gap=1, max_extrapolation=0) is None
+    one = fit_trajectory(np.array([5.0]), np.array([[1.0, 2, 3]]), max_gap=1, max_extrapolation=0.1)
+    assert one.segments[0].kind == "constant"
+    assert np.allclose(one(np.array([5.05])), [[1, 2, 3]])
+    line = fit_trajectory(
+        np.array([0.0, 0.1, 0.2]),
+        np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]),
+        max_gap=1,
+        max_extrapolation=0.1,
+    )
+    assert line.segments[0].kind == "line"
+    assert np.allclose(line(np.array([0.25])), [[2.5, 0, 0]])
+
+
+def test_nan_points_are_ignored():
+    t = np.arange(0, 2, 0.1)
+    xyz = np.column_stack([t, t, t])
+    xyz[3] = np.nan
+    traj = fit_trajectory(t, xyz, max_gap=1, max_extrapolation=0.1)
+    assert np.isfinite(traj(np.array([0.3]))).all()

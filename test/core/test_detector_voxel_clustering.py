@@ -1,0 +1,96 @@
+"""Voxel keys, neighbourhoods, the voxel clusterer against DBSCAN, and the denoise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from sklearn.metrics import adjusted_rand_score
+
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.clustering import (
+    dbscan_points,
+    density_mask,
+    relabel_compact,
+    voxel_cluster_points,
+    voxel_clusters,
+)
+
+
+def test_pack_unpack_roundtrip_and_negative_indices():
+    idx = np.array([[0, 0, 0], [-5, 3, 7], [1000, -1000, 12], [-1, -1, -1]])
+    assert np.array_equal(voxel.unpack(voxel.pack(idx)), idx)
+    keys = voxel.voxel_keys(np.array([[-0.1, 0.1, 0.0], [0.25, -0.25, 0.45]]), 0.2)
+    assert np.array_equal(voxel.unpack(keys), [[-1, 0, 0], [1, -2, 2]])
+
+
+def test_neighbour_pairs_of_a_full_block():
+    idx = np.array([(x, y, z) for x in range(3) for y in range(3) for z in range(3)])
+    keys = np.sort(voxel.pack(idx))
+    first, second = voxel.neighbour_pairs(keys)
+    # 26-adjacency edges in a 3x3x3 grid: 3*(2*3*3) face + 6*(2*2*3) edge + 4*(2*2*2) corner.
+    assert first.size == 54 + 72 + 32
+    sums = voxel.neighbourhood_sums(keys, np.ones(keys.size))
+    centre = np.searchsorted(keys, voxel.pack(np.array([[1, 1, 1]]))[0])
+    assert sums[centre] == 27
+    assert sums.min() == 8  # a corner sees itself and 7 neighbours
+
+
+def test_lookup_finds_present_and_flags_absent():
+    keys = np.array([3, 7, 11], dtype=np.int64)
+    assert voxel.lookup(keys, np.array([7, 8, 3, 12])).tolist() == [1, -1, 0, -1]
+    assert voxel.lookup(np.empty(0, np.int64), np.array([1])).tolist() == [-1]
+
+
+def test_voxel_clusters_core_and_border():
+    # A line of 5 voxels with 4 points each, plus one lonely voxel far away.
+    idx = np.array([[i, 0, 0] for i in range(5)] + [[50, 50, 50]])
+    keys = voxel.pack(idx)
+    order = np.argsort(keys)
+    weights = np.array([4, 4, 4, 4, 4, 1], dtype=float)[order]
+    labels = voxel_clusters(keys[order], weights, min_samples=10)
+    by_index = np.empty(6, dtype=np.int64)
+    by_index[order] = labels
+    # Ends see 8 points (not core) but touch a core voxel: border members of one cluster.
+    assert len(set(by_index[:5].tolist())) == 1 and by_index[0] >= 0
+    assert by_index[5] == -1
+
+
+def blobs(seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    parts = [
+        rng.normal([0, 0, 10], 0.4, (300, 3)),
+        rng.normal([12, 0, 10], 0.4, (200, 3)),
+        rng.normal([0, 15, 20], 0.6, (400, 3)),
+        rng.uniform(-60, 60, (60, 3)),
+    ]
+    return np.vstack(parts)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_voxel_clusterer_agrees_with_dbscan_on_small_clouds(seed):
+    xyz = blobs(seed)
+    lv = voxel_cluster_points(xyz, cluster_voxel=1.0, min_samples=10)
+    ld = dbscan_points(xyz, eps=2.0, min_samples=10)
+    assert len(set(lv[lv >= 0].tolist())) == 3
+    assert len(set(ld[ld >= 0].tolist())) == 3
+    assert adjusted_rand_score(lv, ld) > 0.95
+
+
+def test_clusterers_on_empty_input():
+    assert voxel_cluster_points(np.empty((0, 3)), 1.0, 10).shape == (0,)
+    assert dbscan_points(np.empty((0, 3)), 2.0, 10).shape == (0,)
+    assert density_mask(np.empty((0, 3)), 2.0, 3).shape == (0,)
+
+
+def test_density_mask_drops_isolated_noise_keeps_consistent_track():
+    rng = np.random.default_rng(3)
+    track = np.column_stack([np.linspace(0, 20, 60), np.zeros(60), np.full(60, 30.0)])
+    noise = rng.uniform(-300, 300, (200, 3))
+    keep = density_mask(np.vstack([track, noise]), 2.0, 3)
+    assert keep[:60].all()
+    assert keep[60:].mean() < 0.05
+
+
+def test_relabel_compact():
+    labels, k = relabel_compact(np.array([5, -1, 5, 9, 2]))
+    assert k == 3 and labels.tolist() == [1, -1, 1, 2, 0]

@@ -1,0 +1,73 @@
+"""Evaluator metrics on hand-computed cases."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from clusterfilter_ros.core.evaluation import (
+    evaluate,
+    false_alarm_seconds,
+    interpolate_predictions,
+    observable_mask,
+)
+from clusterfilter_ros.core.frame import TimedPositions
+
+
+def tp(stamps, xyz):
+    return TimedPositions(np.asarray(stamps, float), np.asarray(xyz, float))
+
+
+def test_interpolation_rule():
+    pred = tp([0.0, 0.2, 1.0], [[0, 0, 0], [2, 0, 0], [10, 0, 0]])
+    out = interpolate_predictions(pred, np.array([0.1, 0.2, 0.6, -0.1, 1.2]), max_gap=0.3)
+    assert np.allclose(out[0], [1, 0, 0])  # halfway between rows 0 and 1
+    assert np.allclose(out[1], [2, 0, 0])  # exact match
+    assert np.isnan(out[2]).all()  # neighbours 0.4 s away
+    assert np.isnan(out[3]).all() and np.isnan(out[4]).all()  # outside the span
+
+
+def test_metrics_hand_computed():
+    gt = tp([0, 1, 2, 3, 4], [[0, 0, 0]] * 5)
+    # Predictions at the GT stamps with errors 1, 3, 0 (3D), none at 3 and 4.
+    pred = tp([0, 1, 2], [[1, 0, 0], [0, 3, 0], [0, 0, 0]])
+    r = evaluate(pred, gt, max_gap=0.3, hit_radius=2.0)
+    assert r.n_gt == 5 and r.n_matched == 3
+    assert r.coverage == pytest.approx(0.6)
+    assert r.detection_rate == pytest.approx(0.4)  # errors 1 and 0 are within 2 m
+    assert r.mean_error == pytest.approx(4 / 3)
+    assert r.mse == pytest.approx(10 / 3)
+    assert r.rmse == pytest.approx(math.sqrt(10 / 3))
+    assert r.median_error == pytest.approx(1.0)
+    assert r.p95_error == pytest.approx(np.percentile([1, 3, 0], 95))
+    # The prediction 3 m off is a false alarm; the next row is 1 s later, so it
+    # covers min(1, max_gap) = 0.3 s.
+    assert r.false_alarm_seconds == pytest.approx(0.3)
+    d = r.as_dict()
+    assert d["coverage"] == pytest.approx(0.6) and "errors" not in d
+
+
+def test_observable_mask_and_rate():
+    gt = tp([0, 1, 2, 3], [[0, 0, 0]] * 4)
+    pred = tp([0, 1], [[0, 0, 0], [0, 0, 0]])
+    obs = observable_mask(gt.stamps, hit_stamps=np.array([0.1, 0.9, 1.2]), window=1.0)
+    assert obs.tolist() == [True, True, False, False]
+    r = evaluate(pred, gt, observable=obs)
+    assert r.n_observable == 2 and r.observable_detection_rate == 1.0
+    assert r.detection_rate == 0.5
+    with pytest.raises(ValueError):
+        evaluate(pred, gt, observable=np.ones(3, bool))
+
+
+def test_drone_free_false_alarms():
+    empty_gt = tp(np.empty(0), np.empty((0, 3)))
+    pred = tp([10.0, 10.1, 10.2, 15.0], [[0, 0, 20]] * 4)
+    assert false_alarm_seconds(pred, 0.3) == pytest.approx(0.1 + 0.1 + 0.3 + 0.3)
+    r = evaluate(pred, empty_gt, duration=20.0)
+    assert r.false_alarm_seconds == pytest.approx(0.8)
+    assert r.false_alarm_fraction == pytest.approx(0.04)
+    assert math.isnan(r.coverage) and r.as_dict()["rmse"] is None
+    quiet = evaluate(tp(np.empty(0), np.empty((0, 3))), empty_gt, duration=20.0)
+    assert quiet.false_alarm_seconds == 0.0 and quiet.false_alarm_fraction == 0.0
