@@ -158,23 +158,35 @@ def load_npy(path: Path) -> np.ndarray:
 
 
 def valid_rows(xyz: np.ndarray) -> np.ndarray:
-    """Boolean mask of rows that are real points: not all-zero padding and all finite."""
-    return np.isfinite(xyz).all(axis=1) & (xyz != 0).any(axis=1)
+    """Boolean mask of rows that are real points: not all-zero padding and all finite.
+
+    Computed as ``|x| + |y| + |z|`` being finite and non-zero, which is several times
+    faster than ``isfinite(...).all(1) & (... != 0).any(1)`` on (N, 3) arrays. A row whose
+    sum overflows (coordinates near the dtype's maximum) counts as non-finite.
+    """
+    a = np.abs(xyz)
+    total = a[:, 0] + a[:, 1]
+    total += a[:, 2]
+    return np.isfinite(total) & (total != 0)
 
 
 def load_lidar_file(path: Path, sensor: str, stamp: float | None = None) -> Frame:
-    """One challenge lidar file as a :class:`Frame` (padding and non-finite rows dropped)."""
+    """One challenge lidar file as a :class:`Frame` (padding and non-finite rows dropped).
+
+    Coordinates are converted to float32 first; values beyond float32's range become
+    non-finite and are dropped with the NaN/Inf rows.
+    """
     arr = load_npy(path)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise InputError(f"{path}: expected an (N, 3) array of xyz, found shape {arr.shape}")
     if arr.dtype.kind not in "fiu":
         raise InputError(f"{path}: expected numbers, found dtype {arr.dtype}")
-    xyz = arr[valid_rows(arr)]
-    return Frame(
-        stamp=parse_stamp(path) if stamp is None else stamp,
-        sensor=sensor,
-        xyz=xyz.astype(np.float32),
-    )
+    with np.errstate(over="ignore", invalid="ignore"):
+        xyz = arr.astype(np.float32)
+        keep = valid_rows(xyz)
+    if not keep.all():
+        xyz = xyz[keep]
+    return Frame(stamp=parse_stamp(path) if stamp is None else stamp, sensor=sensor, xyz=xyz)
 
 
 def iter_frames_folder(

@@ -84,7 +84,9 @@ def test_stamp_parsing() -> None:
 
 
 def test_nonfinite_and_zero_rows_dropped(tmp_path: Path) -> None:
-    arr = np.array([[1, 2, 3], [0, 0, 0], [np.nan, 1, 1], [4, np.inf, 1], [0, 0, 5], [0, 0, 0]])
+    arr = np.array(
+        [[1, 2, 3], [0, 0, 0], [np.nan, 1, 1], [4, np.inf, 1], [0, 0, 5], [1e300, 0, 0], [0, 0, 0]]
+    )
     _write_raw(tmp_path / "s" / "lidar_360", "10.5.npy", arr.astype(np.float64))
     seq = read_sequence_folder(tmp_path / "s")
     np.testing.assert_array_equal(seq.frames[0].xyz, [[1, 2, 3], [0, 0, 5]])
