@@ -50,6 +50,8 @@ INTENSITY_FIELDS = ("intensity", "reflectivity", "i")
 TIME_FIELDS = ("timestamp", "offset_time", "time", "t")
 #: A reading of per-point time fits if the median point lies this close (s) to the stamp.
 _MAX_POINT_TIME_S = 1.0
+#: Largest point_step accepted (numpy's itemsize is a C int; real clouds use < 100 bytes).
+_MAX_POINT_STEP = 2**31 - 1
 
 
 class MalformedCloudError(InputError):
@@ -177,24 +179,25 @@ def cloud_dtype(fields: Iterable[Any], point_step: int, is_bigendian: bool = Fal
     reaching beyond ``point_step``. Fields with ``count > 1`` become sub-arrays.
     """
     specs = _field_specs(fields)
-    if point_step <= 0:
-        raise MalformedCloudError(f"point_step is {point_step}, must be positive")
+    if point_step <= 0 or point_step > _MAX_POINT_STEP:
+        raise MalformedCloudError(f"point_step is {point_step}, must be 1..{_MAX_POINT_STEP}")
     names, formats, offsets = [], [], []
     for spec in specs:
         if spec.datatype not in DATATYPES:
             raise MalformedCloudError(f"field {spec.name!r} has unknown datatype {spec.datatype}")
         if spec.name in names:
             raise MalformedCloudError(f"field {spec.name!r} appears twice")
-        base = DATATYPES[spec.datatype]
-        base = base.newbyteorder(">") if is_bigendian and base.itemsize > 1 else base
-        fmt = np.dtype((base, (spec.count,))) if spec.count > 1 else base
-        if spec.offset < 0 or spec.offset + fmt.itemsize > point_step:
-            raise MalformedCloudError(
-                f"field {spec.name!r} at offset {spec.offset} ({fmt.itemsize} bytes) "
-                f"lies beyond point_step {point_step}"
-            )
         if spec.count < 1:
             raise MalformedCloudError(f"field {spec.name!r} has count {spec.count}")
+        base = DATATYPES[spec.datatype]
+        size = base.itemsize * spec.count  # checked before numpy sees it (C int limits)
+        if spec.offset < 0 or spec.offset + size > point_step:
+            raise MalformedCloudError(
+                f"field {spec.name!r} at offset {spec.offset} ({size} bytes) "
+                f"lies beyond point_step {point_step}"
+            )
+        base = base.newbyteorder(">") if is_bigendian and base.itemsize > 1 else base
+        fmt = np.dtype((base, (spec.count,))) if spec.count > 1 else base
         names.append(spec.name)
         formats.append(fmt)
         offsets.append(spec.offset)
@@ -356,10 +359,12 @@ def pointcloud2_to_frame(msg: Any, sensor: str) -> Frame:
     return decode_pointcloud2(msg, sensor).frame
 
 
-def frame_to_pointcloud2_fields(
+def pack_points(
     frame: Frame, layout: str = "livox", tag: Any = None, line: Any = None
-) -> tuple[list[FieldSpec], int, bytes]:
-    """Pack a frame's points: ``(fields, point_step, data)`` for one PointCloud2 row.
+) -> tuple[list[FieldSpec], int, np.ndarray]:
+    """Pack a frame's points into a structured array: ``(fields, point_step, points)``.
+
+    Same content as :func:`frame_to_pointcloud2_fields`, without copying to ``bytes``.
 
     ``layout`` is a key of :data:`LAYOUTS`. For ``livox``, missing intensity is written
     as 0, ``timestamp`` as the absolute time of each point in nanoseconds
@@ -382,7 +387,21 @@ def frame_to_pointcloud2_fields(
         points["timestamp"] = stamp_ns + offsets
         points["tag"] = 0 if tag is None else tag
         points["line"] = 0 if line is None else line
-    return list(specs), point_step, points.tobytes()
+    return list(specs), point_step, points
+
+
+def frame_to_pointcloud2_fields(
+    frame: Frame, layout: str = "livox", tag: Any = None, line: Any = None
+) -> tuple[list[FieldSpec], int, bytes]:
+    """Pack a frame's points: ``(fields, point_step, data)`` for one PointCloud2 row.
+
+    ``layout`` is a key of :data:`LAYOUTS`. For ``livox``, missing intensity is written
+    as 0, ``timestamp`` as the absolute time of each point in nanoseconds
+    (``stamp + point_time``, or the frame stamp when there is no per-point time), and
+    ``tag``/``line`` as given (scalars or per-point arrays, default 0).
+    """
+    specs, point_step, points = pack_points(frame, layout, tag, line)
+    return specs, point_step, points.tobytes()
 
 
 def frame_to_cloud_message(frame: Frame, frame_id: str = "", layout: str = "livox") -> CloudMessage:
@@ -415,12 +434,16 @@ def frame_to_pointcloud2(
     same message family. rclpy classes (which have ``get_fields_and_field_types``) get
     ``data`` as ``array.array('B')``; others (rosbags) as a numpy uint8 array.
     """
-    specs, point_step, data = frame_to_pointcloud2_fields(frame, layout)
+    specs, point_step, points = pack_points(frame, layout)
     fields = [
         field_cls(name=s.name, offset=s.offset, datatype=s.datatype, count=s.count) for s in specs
     ]
-    is_rclpy = hasattr(msg_cls, "get_fields_and_field_types")
-    payload = array.array("B", data) if is_rclpy else np.frombuffer(data, dtype=np.uint8).copy()
+    payload: Any
+    if hasattr(msg_cls, "get_fields_and_field_types"):  # rclpy: one copy into array('B')
+        payload = array.array("B")
+        payload.frombytes(points.view(np.uint8))
+    else:  # rosbags: a uint8 view of the freshly packed points, no copy
+        payload = points.view(np.uint8).reshape(-1)
     return msg_cls(
         header=header,
         height=1,
