@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.errors import InputError
@@ -225,3 +227,51 @@ def test_rclpy_deserialises_our_message_bit_identical() -> None:
         if layout == "livox":
             np.testing.assert_array_equal(back.intensity, frame.intensity)
             np.testing.assert_allclose(back.point_time, frame.point_time, atol=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    order=st.permutations(["x", "y", "z", "intensity"]),
+    xyz_type=st.sampled_from(["f4", "f8"]),
+    extra_pad=st.integers(0, 9),
+    row_padding=st.integers(0, 6),
+    height=st.sampled_from([1, 2, 3]),
+    width=st.integers(0, 12),
+    big_endian=st.booleans(),
+    seed=st.integers(0, 2**16),
+)
+def test_any_packed_layout_property(
+    order: list[str],
+    xyz_type: str,
+    extra_pad: int,
+    row_padding: int,
+    height: int,
+    width: int,
+    big_endian: bool,
+    seed: int,
+) -> None:
+    """Any field order, width, padding and byte order decodes to the same points."""
+    e = ">" if big_endian else "<"
+    formats = {"x": xyz_type, "y": xyz_type, "z": xyz_type, "intensity": "u2"}
+    offsets, pos = [], 0
+    for name in order:
+        offsets.append(pos)
+        pos += np.dtype(formats[name]).itemsize
+    dtype = np.dtype(
+        {
+            "names": list(order),
+            "formats": [e + formats[n] for n in order],
+            "offsets": offsets,
+            "itemsize": pos + extra_pad,
+        }
+    )
+    rng = np.random.default_rng(seed)
+    points = np.zeros(height * width, dtype=dtype)
+    for name in "xyz":
+        points[name] = rng.normal(size=points.shape[0]) * 100
+    points["intensity"] = rng.integers(0, 65535, points.shape[0])
+    msg = structured_to_cloud_message(points, STAMP, height=height, row_padding=row_padding)
+    frame = pointcloud2_to_frame(msg, AVIA)
+    expected = np.stack([points[a] for a in "xyz"], axis=1).astype(np.float32)
+    np.testing.assert_array_equal(frame.xyz, expected)
+    np.testing.assert_array_equal(frame.intensity, points["intensity"].astype(np.float32))
