@@ -30,16 +30,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="S",
         help="stop once S seconds pass without a pose (counted from the first pose)",
     )
+    stop.add_argument(
+        "--until-frames",
+        type=int,
+        metavar="N",
+        help="stop once the detector's /diagnostics report N input frames handled "
+        "(processed, dropped or rejected) and none queued, e.g. the replay's frame count",
+    )
     p.add_argument(
         "--timeout",
         type=float,
-        help="with --until-idle: give up after this many seconds if no pose ever comes",
+        help="with --until-idle/--until-frames: stop after this many seconds regardless",
     )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    for name in ("duration", "until_idle", "timeout"):
+    for name in ("duration", "until_idle", "until_frames", "timeout"):
         value = getattr(args, name)
         if value is not None and not value > 0:
             raise ClusterfilterError(f"--{name.replace('_', '-')} must be > 0, got {value}")
@@ -62,16 +69,21 @@ def run(args: argparse.Namespace) -> int:
         pose_topic=args.topic,
         points_topic=args.points_topic if args.points else None,
         keep_messages=bool(args.bag),
+        watch_diagnostics=args.until_frames is not None,
     )
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     started = time.monotonic()
     reason = "stopped"
     print(f"record: recording {args.topic} ...", flush=True)
+    matched = False
     try:
         while True:
             executor.spin_once(timeout_sec=0.1)
             now = time.monotonic()
+            if not matched and recorder.matched_publishers() > 0:
+                matched = True
+                print(f"record: matched a publisher of {args.topic}", flush=True)
             if args.duration is not None and now - started >= args.duration:
                 reason = f"{args.duration:g} s elapsed"
                 break
@@ -80,9 +92,19 @@ def run(args: argparse.Namespace) -> int:
                 if idle is not None and idle >= args.until_idle:
                     reason = f"no pose for {args.until_idle:g} s"
                     break
-                if idle is None and args.timeout is not None and now - started >= args.timeout:
-                    reason = f"no pose within {args.timeout:g} s"
+            if args.until_frames is not None:
+                handled = recorder.frames_handled()
+                if handled is not None and handled[0] >= args.until_frames and handled[1] == 0:
+                    # The detector's last poses are published before its diagnostics
+                    # count them, but give the transport a moment.
+                    end = time.monotonic() + 0.5
+                    while time.monotonic() < end:
+                        executor.spin_once(timeout_sec=0.05)
+                    reason = f"detector handled {handled[0]} frames"
                     break
+            if args.timeout is not None and now - started >= args.timeout:
+                reason = f"timeout of {args.timeout:g} s"
+                break
     except (KeyboardInterrupt, ExternalShutdownException):
         reason = "interrupted"
     finally:
@@ -93,6 +115,9 @@ def run(args: argparse.Namespace) -> int:
         if args.bag:
             written.append(str(recorder.write_bag(args.bag)))
         n = len(recorder)
+        if n:
+            pos = recorder.positions()
+            print(f"record: poses stamped {pos.stamps[0]:.3f} .. {pos.stamps[-1]:.3f} s")
         recorder.destroy()
         node.destroy_node()
         rclpy.try_shutdown()

@@ -580,6 +580,17 @@ class DetectorNode(Node):
             self._cond.notify_all()
         if self._worker.is_alive() and threading.current_thread() is not self._worker:
             self._worker.join(timeout=30.0)
+        counters = self.counters()
+        summary = (
+            "stopping: received {received}, processed {processed} frames, published "
+            "{estimates} poses; rejected {rejected}, lost in transport {lost}, dropped late "
+            "{dropped_late}, dropped queue full {dropped_queue_full}, resets {resets}, "
+            "detector errors {errors}".format(**counters)
+        )
+        if self.context.ok():
+            self.get_logger().info(summary)
+        else:  # Ctrl-C already shut the context down: /rosout is gone
+            print(f"[{self.get_name()}] {summary}", file=sys.stderr, flush=True)
         super().destroy_node()
 
 

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -26,6 +27,7 @@ from clusterfilter_ros.ros.stamps import time_msg_to_seconds
 
 POSE_TOPIC = "/uav/pose"
 POINTS_TOPIC = "/uav/points"
+DIAGNOSTICS_TOPIC = "/diagnostics"
 
 #: Recorder subscriptions: reliable, keep last 100 (poses are small; none should be lost).
 RECORD_QOS = QoSProfile(
@@ -44,6 +46,8 @@ class PoseRecorder:
         pose_topic: PoseStamped topic to record.
         points_topic: PointCloud2 topic of drone points to collect too (None: not).
         keep_messages: keep the serialized messages for :meth:`write_bag`.
+        watch_diagnostics: follow the detector's ``/diagnostics`` to know how many
+            frames it has handled (:meth:`frames_handled`).
     """
 
     def __init__(
@@ -52,6 +56,7 @@ class PoseRecorder:
         pose_topic: str = POSE_TOPIC,
         points_topic: str | None = None,
         keep_messages: bool = False,
+        watch_diagnostics: bool = False,
     ) -> None:
         self.node = node
         self.pose_topic = pose_topic
@@ -65,10 +70,17 @@ class PoseRecorder:
         self.first_receipt: float | None = None
         self.last_receipt: float | None = None
         self.rejected_points = 0
+        self._handled: tuple[int, int] | None = None
         self._subs = [node.create_subscription(PoseStamped, pose_topic, self._on_pose, RECORD_QOS)]
         if points_topic:
             self._subs.append(
                 node.create_subscription(PointCloud2, points_topic, self._on_points, RECORD_QOS)
+            )
+        if watch_diagnostics:
+            self._subs.append(
+                node.create_subscription(
+                    DiagnosticArray, DIAGNOSTICS_TOPIC, self._on_diagnostics, RECORD_QOS
+                )
             )
 
     def _on_pose(self, msg: PoseStamped) -> None:
@@ -109,6 +121,30 @@ class PoseRecorder:
                     )
                 )
 
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        handled, queued, found = 0, 0, False
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            try:
+                if "frames_processed" in values:
+                    found = True
+                    handled += int(values["frames_processed"]) + int(values["dropped_late"])
+                    handled += int(values["dropped_queue_full"])
+                    queued += int(values["frames_queued"])
+                if "rejected_malformed" in values:
+                    handled += int(values["rejected_malformed"])
+            except (KeyError, ValueError):
+                return  # not the detector's diagnostics
+        if found:
+            with self._lock:
+                self._handled = (handled, queued)
+
+    def frames_handled(self) -> tuple[int, int] | None:
+        """From the detector's last ``/diagnostics``: (frames processed, dropped or
+        rejected so far, frames still queued); None before the first message."""
+        with self._lock:
+            return self._handled
+
     def __len__(self) -> int:
         with self._lock:
             return len(self._stamps)
@@ -124,6 +160,10 @@ class PoseRecorder:
             if not self._points:
                 return np.empty((0, 3), dtype=np.float32)
             return np.concatenate(self._points, axis=0)
+
+    def matched_publishers(self) -> int:
+        """Publishers of the pose topic this recorder is matched with right now."""
+        return self._subs[0].get_publisher_count()
 
     def idle_for(self, now: float | None = None) -> float | None:
         """Seconds since the last pose (None before the first one)."""

@@ -1,0 +1,80 @@
+"""Node, replay and recorder as three processes over loopback DDS (the ros_env domain)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+
+from clusterfilter_ros.core.evaluation import evaluate  # noqa: E402
+from clusterfilter_ros.core.params import detector_params  # noqa: E402
+from clusterfilter_ros.core.streaming import run_streaming  # noqa: E402
+from clusterfilter_ros.io.dataset import open_input, write_output  # noqa: E402
+from clusterfilter_ros.io.groundtruth import read_positions_csv  # noqa: E402
+from clusterfilter_ros.io.pointcloud2 import make_pointcloud2, pointcloud2_to_frame  # noqa: E402
+from clusterfilter_ros.resources import config_file  # noqa: E402
+from clusterfilter_ros.ros import processes  # noqa: E402
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def test_detector_replay_recorder_processes(tmp_path, ros_env, small_sequence):
+    folder = write_output(small_sequence, tmp_path / "seq", fmt="mmaud")
+    sequence = open_input(folder)
+    n_frames = len(sequence.frames)
+    logs = tmp_path / "logs"
+    csv = tmp_path / "poses.csv"
+    detector = processes.start(
+        "detector",
+        processes.cli_command("detector", "--params-file", str(config_file("detector.yaml"))),
+        ros_env,
+        logs,
+    )
+    recorder = processes.start(
+        "recorder",
+        processes.cli_command(
+            "record",
+            str(csv),
+            "--bag",
+            str(tmp_path / "bag"),
+            "--until-frames",
+            str(n_frames),
+            "--timeout",
+            "90",
+        ),
+        ros_env,
+        logs,
+    )
+    children = [detector, recorder]
+    try:
+        assert processes.wait_for_log(recorder, "record: matched", 60.0), (
+            recorder.log_tail() + detector.log_tail()
+        )
+        replay = processes.start(
+            "replay",
+            processes.cli_command("replay", str(folder), "--rate", "2", "--wait-for", "/uav/pose"),
+            ros_env,
+            logs,
+        )
+        children.append(replay)
+        assert replay.wait(90) == 0, replay.log_tail()
+        assert recorder.wait(60) == 0, recorder.log_tail() + detector.log_tail()
+        assert "detector handled" in recorder.log_tail(), recorder.log_tail()
+        assert detector.interrupt() == 0, detector.log_tail()  # Ctrl-C exits 0
+    finally:
+        for child in children:
+            if child.running():
+                child.interrupt(timeout=5.0)
+
+    report = "\n".join(c.log_tail(8) for c in children)
+    poses = read_positions_csv(csv)
+    # Three processes, DDS in between: still exactly the streaming core's answer.
+    wire = [pointcloud2_to_frame(make_pointcloud2(f, f.sensor), f.sensor) for f in sequence.frames]
+    expected = run_streaming(wire, detector_params())
+    assert len(poses) == len(expected), report
+    np.testing.assert_array_equal(poses.xyz, [e.position for e in expected])
+    result = evaluate(poses, sequence.ground_truth)
+    assert result.coverage > 0.8, (result.as_dict(), report)
+    assert result.median_error < 0.3, (result.as_dict(), report)
+    assert (tmp_path / "bag" / "metadata.yaml").is_file()
