@@ -19,8 +19,6 @@ import dataclasses
 import functools
 import heapq
 import os
-import sqlite3
-import struct
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -119,21 +117,14 @@ def typestore_for(ros_version: int) -> Any:
 
 
 def _bag_errors() -> tuple[type[BaseException], ...]:
-    from rosbags.rosbag1 import ReaderError as Ros1ReaderError
-    from rosbags.rosbag2 import ReaderError as Ros2ReaderError
+    """Exceptions raised by rosbags' readers on damaged files.
 
-    return (
-        Ros1ReaderError,
-        Ros2ReaderError,
-        OSError,
-        EOFError,
-        ValueError,
-        KeyError,
-        IndexError,
-        struct.error,
-        sqlite3.Error,
-        AssertionError,
-    )
+    Besides its own ReaderError, rosbags lets low-level errors through on corrupt data
+    (struct, sqlite3, zstd/lz4, seek overflows, ...), so everything derived from
+    :class:`Exception` raised *inside rosbags' reading code* is treated as a damaged bag;
+    the original is chained (``--debug`` shows it).
+    """
+    return (Exception,)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -168,12 +159,28 @@ class _OpenBag:
             else:
                 from rosbags.rosbag2 import Reader as Ros2Reader
 
-                self.reader = Ros2Reader(self.path)
+                self.reader = Ros2Reader(self._ros2_storage_path())
             self.reader.open()
         except self.errors as exc:
             raise InputError(
                 f"{self.path}: cannot read bag, truncated or corrupt? ({_one_line(exc)})"
             ) from exc
+
+    def _ros2_storage_path(self) -> Path:
+        """The bag folder, or its only storage file when ``metadata.yaml`` is missing
+        (e.g. a recording that was killed before rosbag2 wrote it)."""
+        p = self.path
+        if not p.is_dir() or (p / "metadata.yaml").is_file():
+            return p
+        files = sorted(p.glob("*.db3")) + sorted(p.glob("*.mcap"))
+        if len(files) == 1:
+            return files[0]
+        if not files:
+            raise InputError(f"{p}: no metadata.yaml and no .db3/.mcap file (not a ROS 2 bag)")
+        raise InputError(
+            f"{p}: no metadata.yaml and {len(files)} storage files; pass one of them, "
+            f"e.g. {files[0]}"
+        )
 
     def close(self) -> None:
         try:
@@ -231,7 +238,7 @@ class _OpenBag:
             if self.ros_version == 1:
                 return store.deserialize_ros1(raw, msgtype)
             return store.deserialize_cdr(raw, msgtype)
-        except (*self.errors, TypeError) as exc:
+        except self.errors as exc:
             raise InputError(f"{what}: cannot decode {msgtype} ({_one_line(exc)})") from exc
 
 

@@ -203,3 +203,18 @@ def test_garbage_and_missing(tmp_path: Path) -> None:
         open_input(tmp_path / "g.db3")
     with pytest.raises(InputError, match="no such"):
         read_bag(tmp_path / "missing.bag")
+
+
+def test_ros2_bag_without_metadata_and_damaged_chunks(tmp_path: Path) -> None:
+    seq = _sequence(3)
+    path = write_bag(seq, tmp_path / "killed", storage="mcap")
+    (path / "metadata.yaml").unlink()  # a recorder killed before writing it
+    _assert_same(seq, open_input(path))
+    path = write_bag(seq, tmp_path / "damaged", storage="mcap")
+    victim = next(path.glob("*.mcap"))
+    data = bytearray(victim.read_bytes())
+    data[len(data) // 2 : len(data) // 2 + 200] = b"\xff" * 200
+    victim.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="truncated or corrupt") as info:
+        read_bag(path)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
