@@ -218,3 +218,30 @@ def test_ros2_bag_without_metadata_and_damaged_chunks(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="truncated or corrupt") as info:
         read_bag(path)
     assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_rclpy_reads_the_messages_we_write_into_ros2_bags(tmp_path: Path) -> None:
+    """The CDR bytes in our ROS 2 bags deserialise with rclpy into the same points."""
+    pytest.importorskip("sensor_msgs.msg")
+    from geometry_msgs.msg import PointStamped
+    from rclpy.serialization import deserialize_message
+    from rosbags.rosbag2 import Reader
+    from sensor_msgs.msg import PointCloud2
+
+    from clusterfilter_ros.io.pointcloud2 import decode_pointcloud2
+
+    seq = _sequence(2)
+    path = write_bag(seq, tmp_path / "b", storage="mcap")
+    lidar, gt = [], []
+    with Reader(path) as reader:
+        for conn, _, raw in reader.messages():
+            if conn.msgtype == "sensor_msgs/msg/PointCloud2":
+                lidar.append(decode_pointcloud2(deserialize_message(raw, PointCloud2), "x").frame)
+            else:
+                gt.append(deserialize_message(raw, PointStamped))
+    lidar.sort(key=lambda f: f.stamp)
+    assert len(lidar) == len(seq.frames)
+    for a, b in zip(seq.frames, lidar, strict=True):
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+        np.testing.assert_allclose(a.point_time, b.point_time, atol=1e-6)
+    assert [m.point.x for m in gt] == list(seq.ground_truth.xyz[:, 0])
