@@ -31,6 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default: 0)")
     p.add_argument("--out", help="output folder (default: a new temporary folder)")
     p.add_argument(
+        "--duration", type=float, help="seconds to simulate (default: the scenario's length)"
+    )
+    p.add_argument(
         "--rate", type=float, default=1.0, help="replay speed, 1 = real time (default: 1)"
     )
     p.add_argument("--params-file", help="detector parameters (default: config/detector.yaml)")
@@ -68,7 +71,9 @@ def run(args: argparse.Namespace) -> int:
         raise ClusterfilterError(f"params file {params_file} does not exist")
 
     print(f"demo: simulating scenario '{args.scenario}' (seed {args.seed}) ...", flush=True)
-    simulated = simulate(args.scenario, seed=args.seed)
+    if args.duration is not None and not args.duration > 0:
+        raise ClusterfilterError(f"--duration must be > 0, got {args.duration}")
+    simulated = simulate(args.scenario, seed=args.seed, duration=args.duration)
     folder = write_output(simulated.sequence, out / "sequence", fmt="mmaud", overwrite=True)
     sequence = open_input(folder)
     if sequence.ground_truth is None or not len(sequence.ground_truth):

@@ -1,0 +1,95 @@
+"""The ROS subcommands' argument handling: detector, replay, record, demo."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+
+from clusterfilter_ros.cli import main
+from clusterfilter_ros.cli.detector import ros_arguments
+from clusterfilter_ros.errors import InputError, ParameterError
+from clusterfilter_ros.resources import config_file
+from clusterfilter_ros.ros import processes
+
+
+def test_detector_arguments_typed_for_ros():
+    args = ros_arguments(
+        str(config_file("detector.yaml")),
+        ["eps=1", "frame_id=world", "target_offset=0,0,0.25", "min_samples=5"],
+        ["--", "-r", "__node:=other"],
+    )
+    assert args[:2] == ["clusterfilter-detector", "--ros-args"]
+    assert "eps:=1.0" in args  # a double must be written as one for ROS
+    assert "target_offset:=[0.0,0.0,0.25]" in args
+    assert "min_samples:=5" in args and "frame_id:=world" in args
+    assert args[-2:] == ["-r", "__node:=other"]
+    with pytest.raises(ParameterError, match="unknown parameter 'epss'"):
+        ros_arguments(None, ["epss=1"], [])
+    with pytest.raises(ParameterError, match="eps"):
+        ros_arguments(None, ["eps=-3"], [])
+    with pytest.raises(InputError, match="does not exist"):
+        ros_arguments("/no/such.yaml", [], [])
+
+
+def test_user_errors_exit_2_before_ros_starts(tmp_path, capsys):
+    assert main(["replay", str(tmp_path / "missing")]) == 2
+    assert "missing" in capsys.readouterr().err
+    assert main(["replay", str(tmp_path), "--rate", "-1"]) == 2
+    assert main(["record", str(tmp_path / "a.csv"), "--duration", "0"]) == 2
+    assert main(["demo", "--rate", "0", "--out", str(tmp_path / "d")]) == 2
+    assert main(["detector", "-p", "eps=abc"]) == 2
+    assert "eps" in capsys.readouterr().err
+
+
+@pytest.mark.ros
+def test_detector_rejects_bad_params_file_at_start(tmp_path, ros_env):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    eps: 100.0\n")
+    proc = subprocess.run(
+        processes.cli_command("detector", "--params-file", str(bad)),
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert "eps" in proc.stderr
+
+
+@pytest.mark.ros
+def test_record_without_publisher_writes_empty_csv(tmp_path, ros_env):
+    out = tmp_path / "poses.csv"
+    proc = subprocess.run(
+        processes.cli_command("record", str(out), "--duration", "0.5", "--topic", "/nobody"),
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert out.read_text() == "timestamp,x,y,z\n"
+    assert "no message arrived" in proc.stderr
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_short_demo_writes_outputs(tmp_path, ros_env):
+    out = tmp_path / "demo"
+    proc = subprocess.run(
+        processes.cli_command(
+            "demo", "--duration", "4", "--rate", "2", "--out", str(out), "--seed", "3"
+        ),
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    summary = json.loads((out / "metrics.json").read_text())
+    assert summary["frames"] > 0 and "coverage" in summary["metrics"]
+    assert (out / "trajectory.png").stat().st_size > 10_000
+    assert (out / "estimates.csv").read_text().startswith("timestamp,x,y,z")
+    assert "trajectory plot" in proc.stdout
+    assert "stopping: received" in (out / "logs" / "detector.log").read_text()
