@@ -12,7 +12,16 @@ Pipeline (defaults are the authors' published ones, see REFERENCE section 1):
    ``DBSCAN(eps=2.0, min_samples=10)``; points labelled noise are dropped.
 2. Mid360 ground cut: keep points with ``z > 3.5`` m.
 3. Global clusterer (3.2): ``DBSCAN(eps=2.0, min_samples=10)`` on every remaining point
-   of both lidars over the whole sequence.
+   of both lidars over the whole sequence. scikit-learn's DBSCAN materialises every
+   point's eps-neighbourhood, so its memory grows with points x neighbours: on a
+   simulated 20 s sequence (~300k points above 3.5 m, ~20,000 neighbours within 2 m on
+   average) that is ~6e9 indices, ~48 GB, more than the machine has. The reference
+   therefore estimates the neighbourhood size first (KD-tree counts on a sample) and,
+   when exact DBSCAN would need more than ``max_dbscan_gb``, runs the same DBSCAN on
+   ``fallback_voxel`` (0.15 m) voxel centroids weighted by their point counts
+   (``sample_weight``; REFERENCE section 5), every point taking its voxel's label. The
+   fallback is *faster* than the literal method, so speed ratios against it are lower
+   bounds. ``ReferenceResult.dbscan_mode`` says which one ran.
 4. Candidate gates: a global cluster is a candidate if it has 100..10,000 points, its
    centroid is at ``z >= 6`` m and its occupied 0.2 m voxels cover at least 0.3 m^3.
 5. Local clusterer (3.2): a "frame" is one lidar period (0.1 s) of both lidars; for
@@ -27,7 +36,8 @@ Pipeline (defaults are the authors' published ones, see REFERENCE section 1):
 7. Trajectory (3.4): the selected points, ordered by time, are grouped per frame
    (centroid, weight = point count); a cubic smoothing B-spline per axis
    (``scipy.interpolate.splrep``, k=3) through them is evaluated at the requested
-   stamps inside the time span the points cover (no estimate outside it).
+   stamps inside the time span the points cover and within ``max_gap`` (1 s) of a frame
+   with selected points (no estimate elsewhere).
 
 Choices the paper leaves open are written down here: the frame = 0.1 s slot of both
 lidars; per-point times (``Frame.point_time``) are used when the frames carry them;
@@ -65,7 +75,10 @@ class ReferenceParams:
     iou_floor: float = 1e-3
     frame_period: float = 0.1
     spline_sigma: float = 0.3
+    max_gap: float = 1.0
     target_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    max_dbscan_gb: float = 4.0
+    fallback_voxel: float = 0.15
 
 
 @dataclass
@@ -78,6 +91,7 @@ class ReferenceResult:
         drone_time: (K,) times of those points (s).
         n_points_clustered: size of the global cloud given to DBSCAN.
         n_candidates: global clusters that passed the gates.
+        dbscan_mode: ``exact`` (DBSCAN on every point) or ``voxel-weighted`` (fallback).
         scores: score of each candidate (same order as the candidates).
         timings: wall seconds per stage.
     """
@@ -89,6 +103,7 @@ class ReferenceResult:
     n_candidates: int
     scores: list[float] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    dbscan_mode: str = "exact"
 
 
 def _frame_points(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray]:
@@ -109,11 +124,47 @@ def _voxel_keys(xyz: np.ndarray, voxel_size: float) -> np.ndarray:
     return np.unique(keys)
 
 
+def estimated_dbscan_gb(xyz: np.ndarray, eps: float, sample: int = 1000) -> float:
+    """Memory (GB) scikit-learn DBSCAN would need for the neighbourhoods of ``xyz``.
+
+    Counts neighbours within ``eps`` of a random sample of points with a KD-tree and
+    scales to all points (8 bytes per neighbour index, plus 50% for the arrays around).
+    """
+    from sklearn.neighbors import KDTree
+
+    if len(xyz) <= sample:
+        return 0.0
+    rng = np.random.default_rng(0)
+    tree = KDTree(xyz)
+    counts = tree.query_radius(
+        xyz[rng.choice(len(xyz), sample, replace=False)], eps, count_only=True
+    )
+    return float(counts.mean()) * len(xyz) * 8 * 1.5 / 2**30
+
+
+def dbscan_labels(
+    xyz: np.ndarray, eps: float, min_samples: int, params: ReferenceParams
+) -> tuple[np.ndarray, str]:
+    """DBSCAN labels of every point (-1 noise) and the mode used (see module docstring)."""
+    if len(xyz) == 0:
+        return np.empty(0, np.int64), "exact"
+    if estimated_dbscan_gb(xyz, eps) <= params.max_dbscan_gb:
+        return DBSCAN(eps=eps, min_samples=min_samples).fit_predict(xyz), "exact"
+    keys = np.floor(xyz / params.fallback_voxel).astype(np.int64)
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    centroids = np.zeros((len(counts), 3))
+    np.add.at(centroids, inverse, xyz)
+    centroids /= counts[:, None]
+    labels = DBSCAN(eps=eps, min_samples=min_samples).fit_predict(centroids, sample_weight=counts)
+    return labels[inverse], "voxel-weighted"
+
+
 def denoise_avia(xyz: np.ndarray, params: ReferenceParams) -> np.ndarray:
     """Boolean mask of superimposed Avia points that DBSCAN does not call noise."""
     if len(xyz) == 0:
         return np.zeros(0, dtype=bool)
-    labels = DBSCAN(eps=params.avia_eps, min_samples=params.avia_min_samples).fit_predict(xyz)
+    labels, _mode = dbscan_labels(xyz, params.avia_eps, params.avia_min_samples, params)
     return labels >= 0
 
 
@@ -165,7 +216,14 @@ def fit_trajectory(
     t = np.bincount(inverse, weights=times) / counts
     order = np.argsort(t)
     t, centroid, counts = t[order], centroid[order], counts[order]
-    inside = (stamps >= t[0]) & (stamps <= t[-1])
+    # Inside the span of the points and within max_gap of a frame that has points.
+    nearest = np.clip(np.searchsorted(t, stamps), 1, len(t) - 1) if len(t) > 1 else None
+    if nearest is None:
+        near = np.abs(stamps - t[0]) <= params.max_gap
+    else:
+        gap = np.minimum(np.abs(stamps - t[nearest - 1]), np.abs(stamps - t[nearest]))
+        near = gap <= params.max_gap
+    inside = (stamps >= t[0]) & (stamps <= t[-1]) & near
     if not inside.any():
         return empty
     query = stamps[inside]
@@ -229,7 +287,7 @@ def reference_detect(
     tic = time.perf_counter()
     if len(xyz) == 0:
         return empty
-    labels = DBSCAN(eps=params.eps, min_samples=params.min_samples).fit_predict(xyz)
+    labels, mode = dbscan_labels(xyz, params.eps, params.min_samples, params)
     timings["global_dbscan"] = time.perf_counter() - tic
 
     tic = time.perf_counter()
@@ -264,6 +322,7 @@ def reference_detect(
             0,
             [],
             timings,
+            mode,
         )
     best = candidates[int(np.argmax(scores))]
     estimate = fit_trajectory(
@@ -271,7 +330,7 @@ def reference_detect(
     )
     timings["spline"] = time.perf_counter() - tic
     return ReferenceResult(
-        estimate, xyz[best], times[best], len(xyz), len(candidates), scores, timings
+        estimate, xyz[best], times[best], len(xyz), len(candidates), scores, timings, mode
     )
 
 
