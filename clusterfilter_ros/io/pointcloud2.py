@@ -325,25 +325,29 @@ def decode_pointcloud2(msg: Any, sensor: str) -> DecodedCloud:
     stamp = stamp_to_seconds(msg.header.stamp)
     n = points.shape[0]
     xyz = np.empty((n, 3), dtype=np.float32)
-    for i, axis in enumerate("xyz"):
-        if points.dtype[axis].shape:
-            raise MalformedCloudError(f"field {axis!r} has count {points.dtype[axis].shape[0]}")
-        xyz[:, i] = points[axis]
-    keep = np.isfinite(xyz).all(axis=1)
-    n_kept = int(np.count_nonzero(keep))
-    all_kept = n_kept == n
-    intensity = None
-    name = next((f for f in INTENSITY_FIELDS if f in names and not points.dtype[f].shape), None)
-    if name is not None:
-        intensity = points[name].astype(np.float32)
-        intensity = intensity if all_kept else intensity[keep]
-    point_time, time_field, time_unit = None, None, None
-    time_field = next((f for f in TIME_FIELDS if f in names and not points.dtype[f].shape), None)
-    if time_field is not None:
-        raw = points[time_field]
-        point_time, time_unit = _point_time_seconds(
-            raw if all_kept else raw[keep], stamp, time_field
+    # float64 values beyond float32's range become Inf (and are dropped) without warnings.
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i, axis in enumerate("xyz"):
+            if points.dtype[axis].shape:
+                raise MalformedCloudError(f"field {axis!r} has count {points.dtype[axis].shape[0]}")
+            xyz[:, i] = points[axis]
+        keep = np.isfinite(xyz).all(axis=1)
+        n_kept = int(np.count_nonzero(keep))
+        all_kept = n_kept == n
+        intensity = None
+        name = next((f for f in INTENSITY_FIELDS if f in names and not points.dtype[f].shape), None)
+        if name is not None:
+            intensity = points[name].astype(np.float32)
+            intensity = intensity if all_kept else intensity[keep]
+        point_time, time_field, time_unit = None, None, None
+        time_field = next(
+            (f for f in TIME_FIELDS if f in names and not points.dtype[f].shape), None
         )
+        if time_field is not None:
+            raw = points[time_field]
+            point_time, time_unit = _point_time_seconds(
+                raw if all_kept else raw[keep], stamp, time_field
+            )
     frame = Frame(
         stamp=stamp,
         sensor=sensor,
