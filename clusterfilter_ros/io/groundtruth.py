@@ -49,7 +49,7 @@ def read_positions_csv(path: str | os.PathLike[str]) -> TimedPositions:
     """Read a ``timestamp,x,y,z[,extra...]`` CSV; extra columns go to ``.extra``."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # tolerate a BOM (spreadsheet exports)
     except FileNotFoundError as exc:
         raise InputError(f"{p}: no such file") from exc
     except (OSError, UnicodeDecodeError) as exc:

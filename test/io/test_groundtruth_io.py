@@ -87,3 +87,10 @@ def test_atomic_writers_keep_old_file_on_failure(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result.txt"]
     atomic_write_text(path, "new")
     assert path.read_text() == "new"
+
+
+def test_csv_with_bom_and_crlf(tmp_path: Path) -> None:
+    path = tmp_path / "excel.csv"
+    path.write_bytes("\ufefftimestamp,x,y,z\r\n1.5,1,2,3\r\n".encode())
+    pos = read_positions_csv(path)
+    np.testing.assert_array_equal(pos.xyz, [[1, 2, 3]])
