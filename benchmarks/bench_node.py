@@ -1,0 +1,141 @@
+"""Latency of the detector node across processes: replay publish -> /uav/pose received.
+
+Starts the detector as its own process (loopback DDS, a random ROS domain), then from
+this process replays a simulated scenario at real time, records when each frame was
+published and when the pose for that frame's stamp arrived, and collects the node's
+own /diagnostics (processing time per frame, receipt-to-publish latency).
+
+    python benchmarks/bench_node.py [--scenario default] [--seed 0] [--rate 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from clusterfilter_ros.ros import processes  # noqa: E402
+
+
+def percentiles(values: list[float]) -> str:
+    if not values:
+        return "n/a"
+    a = np.asarray(values)
+    return (
+        f"p50 {np.percentile(a, 50):.1f}  p95 {np.percentile(a, 95):.1f}  "
+        f"max {a.max():.1f}  (n={a.size})"
+    )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="default")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rate", type=float, default=1.0)
+    parser.add_argument("--duration", type=float, default=None)
+    args = parser.parse_args()
+
+    from clusterfilter_ros.io.pointcloud2 import seconds_to_stamp
+    from clusterfilter_ros.resources import config_file
+    from clusterfilter_ros.sim.scenarios import simulate
+
+    simulated = simulate(args.scenario, seed=args.seed, duration=args.duration)
+    sequence = simulated.sequence
+    env = processes.demo_environment()
+    os.environ.update(env)  # this process joins the same confined domain
+    log_dir = Path(os.environ.get("TMPDIR", "/tmp")) / f"bench_node_{os.getpid()}"
+    offset = ",".join(repr(float(v)) for v in np.asarray(simulated.prism_offset).reshape(3))
+    detector = processes.start(
+        "detector",
+        processes.cli_command(
+            "detector",
+            "--params-file",
+            str(config_file("detector.yaml")),
+            "-p",
+            f"target_offset={offset}",
+        ),
+        env,
+        log_dir,
+    )
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.executors import SingleThreadedExecutor
+
+    from clusterfilter_ros.ros.record import RECORD_QOS
+    from clusterfilter_ros.ros.replay import Replayer
+
+    rclpy.init(args=["bench_node"])
+    node = rclpy.create_node("bench_node")
+    published: dict[tuple[int, int], float] = {}
+    received: dict[tuple[int, int], float] = {}
+    node_processing: list[float] = []
+    node_latency: list[float] = []
+    node_processing_mean: list[float] = []
+    node_latency_mean: list[float] = []
+
+    def on_pose(msg: PoseStamped) -> None:
+        received[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = time.monotonic()
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "processing_ms_max" in values and int(values["frames_processed"]) > 0:
+                node_processing.append(float(values["processing_ms_max"]))
+                node_latency.append(float(values["latency_ms_max"]))
+                node_processing_mean.append(float(values["processing_ms_mean"]))
+                node_latency_mean.append(float(values["latency_ms_mean"]))
+
+    node.create_subscription(PoseStamped, "/uav/pose", on_pose, RECORD_QOS)
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, RECORD_QOS)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    replayer = Replayer(node)
+    try:
+        if not replayer.wait_for_subscribers(60.0, ["/uav/pose"]):
+            print("detector did not subscribe:\n" + detector.log_tail(), file=sys.stderr)
+            return 1
+
+        def on_frame(frame) -> None:
+            published[seconds_to_stamp(frame.stamp)] = time.monotonic()
+
+        stats = replayer.play(
+            sequence.frames, sequence.ground_truth, rate=args.rate, on_frame=on_frame
+        )
+        time.sleep(3.0)
+    finally:
+        code = detector.interrupt()
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    latencies = [(received[k] - published[k]) * 1000.0 for k in received if k in published]
+    n_points = {
+        s: int(np.mean([len(f) for f in sequence.frames if f.sensor == s]))
+        for s in sequence.sensors()
+    }
+    print(
+        f"scenario {args.scenario} seed {args.seed}: {stats.total_frames} frames "
+        f"({n_points} points/frame on average) replayed at rate {args.rate:g} "
+        f"in {stats.wall_seconds:.1f} s"
+    )
+    print(f"poses received: {len(received)}; detector exit code {code}")
+    print(f"publish -> pose received (ms), per pose:      {percentiles(latencies)}")
+    print(f"node processing per frame (ms), worst per 1 s: {percentiles(node_processing)}")
+    print(f"node receipt -> done (ms), worst per 1 s:      {percentiles(node_latency)}")
+    print(f"node processing per frame (ms), mean per 1 s:  {percentiles(node_processing_mean)}")
+    print(f"node receipt -> done (ms), mean per 1 s:       {percentiles(node_latency_mean)}")
+    print(detector.log_tail(1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
