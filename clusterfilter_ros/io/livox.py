@@ -25,7 +25,7 @@ import numpy as np
 
 from clusterfilter_ros.core.frame import Frame
 from clusterfilter_ros.errors import InputError
-from clusterfilter_ros.io.pointcloud2 import seconds_to_stamp
+from clusterfilter_ros.io.pointcloud2 import finite_rows, seconds_to_stamp
 
 #: Message type names (ROS 2 form) of the two drivers.
 CUSTOM_MSG_TYPES = ("livox_ros_driver/msg/CustomMsg", "livox_ros_driver2/msg/CustomMsg")
@@ -205,7 +205,7 @@ def custom_msg_to_decoded(data: CustomMsgData, sensor: str) -> DecodedCustomMsg:
     pts = data.points
     xyz = np.empty((pts.shape[0], 3), dtype=np.float32)
     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts["x"], pts["y"], pts["z"]
-    keep = np.isfinite(xyz).all(axis=1)
+    keep = finite_rows(xyz)
     n_kept = int(np.count_nonzero(keep))
     if n_kept != len(keep):
         xyz, pts = xyz[keep], pts[keep]

@@ -273,6 +273,20 @@ def cloud_fields_to_arrays(
     return out
 
 
+def finite_rows(xyz: np.ndarray) -> np.ndarray:
+    """Mask of (N, 3) rows whose coordinates are all finite.
+
+    ``x + y + z`` is finite exactly when all three are, except that a sum overflowing
+    the dtype (coordinates near its maximum, ~3e38 m for float32) also counts as
+    non-finite. Three column operations are several times faster than
+    ``np.isfinite(xyz).all(axis=1)``.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = xyz[:, 0] + xyz[:, 1]
+        total += xyz[:, 2]
+    return np.isfinite(total)
+
+
 def _point_time_seconds(
     values: np.ndarray, stamp: float, field_name: str
 ) -> tuple[np.ndarray | None, str]:
@@ -288,7 +302,8 @@ def _point_time_seconds(
     v = values.astype(np.float64)
     if v.size == 0:
         return v, "s-relative"
-    finite = v[np.isfinite(v)]
+    sample = v[:: max(1, v.size // 1024)]  # the unit is decided on <= ~2k points
+    finite = sample[np.isfinite(sample)]
     if finite.size == 0:
         return None, "unrecognised"
     median = float(np.median(finite))
@@ -331,7 +346,7 @@ def decode_pointcloud2(msg: Any, sensor: str) -> DecodedCloud:
             if points.dtype[axis].shape:
                 raise MalformedCloudError(f"field {axis!r} has count {points.dtype[axis].shape[0]}")
             xyz[:, i] = points[axis]
-        keep = np.isfinite(xyz).all(axis=1)
+        keep = finite_rows(xyz)
         n_kept = int(np.count_nonzero(keep))
         all_kept = n_kept == n
         intensity = None
