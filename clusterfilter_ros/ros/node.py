@@ -339,7 +339,16 @@ class DetectorNode(Node):
                 self._busy = True
             try:
                 for item in batch:
-                    self._process(item)
+                    try:
+                        self._process(item)
+                    except Exception as exc:  # e.g. publishing while shutting down
+                        with self._cond:
+                            self._errors += 1
+                            self._last_error = f"{type(exc).__name__}: {exc}"
+                        self.get_logger().error(
+                            f"could not handle a frame: {type(exc).__name__}: {exc}",
+                            throttle_duration_sec=5.0,
+                        )
             finally:
                 with self._cond:
                     self._busy = False
@@ -352,7 +361,8 @@ class DetectorNode(Node):
             if item.generation != self._generation:
                 self._detector.reset()
                 self._generation = item.generation
-                self._path.clear()
+                with self._cond:
+                    self._path.clear()
             try:
                 estimate = self._detector.push(item.frame)
                 if estimate is not None and self._points_pub.get_subscription_count() > 0:

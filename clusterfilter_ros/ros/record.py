@@ -130,6 +130,7 @@ class PoseRecorder:
                     found = True
                     handled += int(values["frames_processed"]) + int(values["dropped_late"])
                     handled += int(values["dropped_queue_full"])
+                    handled += int(values.get("detector_errors", "0"))
                     queued += int(values["frames_queued"])
                 if "rejected_malformed" in values:
                     handled += int(values["rejected_malformed"])
@@ -140,8 +141,9 @@ class PoseRecorder:
                 self._handled = (handled, queued)
 
     def frames_handled(self) -> tuple[int, int] | None:
-        """From the detector's last ``/diagnostics``: (frames processed, dropped or
-        rejected so far, frames still queued); None before the first message."""
+        """From the detector's last ``/diagnostics``: (input frames handled so far, i.e.
+        processed, failed, dropped or rejected; frames still queued); None before the
+        first message."""
         with self._lock:
             return self._handled
 

@@ -75,6 +75,6 @@ def test_detector_replay_recorder_processes(tmp_path, ros_env, small_sequence):
     assert len(poses) == len(expected), report
     np.testing.assert_array_equal(poses.xyz, [e.position for e in expected])
     result = evaluate(poses, sequence.ground_truth)
-    assert result.coverage > 0.8, (result.as_dict(), report)
-    assert result.median_error < 0.3, (result.as_dict(), report)
+    assert result.coverage > 0.5, (result.as_dict(), report)
+    assert result.median_error < 0.5, (result.as_dict(), report)
     assert (tmp_path / "bag" / "metadata.yaml").is_file()
