@@ -138,6 +138,7 @@ def test_invalid_start_parameter_is_a_parameter_error(rclpy_context):
 
 def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_for):
     from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.parameter import Parameter
     from sensor_msgs.msg import PointCloud2, PointField
 
     rig = make_rig(diagnostics_period=0.2, stale_timeout=0.5, qos_depth=100)
@@ -153,6 +154,8 @@ def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_
     assert wait_for(lambda: rig.detector.counters()["received"]["avia"] == 5, 10.0)
     status = detector_status()
     assert status.level == DiagnosticStatus.WARN and "mid360" in status.message
+    # Wide enough that a busy machine cannot make a lidar look silent during the check.
+    assert rig.detector.set_parameters([Parameter("stale_timeout", value=30.0)])[0].successful
     rig.replayer.play(small_sequence.frames[10:20], rate=0.0)
     assert wait_for(lambda: rig.detector.counters()["received"]["mid360"] >= 5, 10.0)
     rig.detector.wait_until_idle(10.0)
@@ -175,4 +178,5 @@ def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_
     assert statuses["avia input"].level in (DiagnosticStatus.WARN, DiagnosticStatus.ERROR)
     assert {kv.key: kv.value for kv in statuses["avia input"].values}["rejected_malformed"] == "1"
     # Silence: both inputs stale after stale_timeout.
+    assert rig.detector.set_parameters([Parameter("stale_timeout", value=0.2)])[0].successful
     assert wait_for(lambda: detector_status().level == DiagnosticStatus.STALE, 5.0)
