@@ -245,3 +245,38 @@ def test_rclpy_reads_the_messages_we_write_into_ros2_bags(tmp_path: Path) -> Non
         np.testing.assert_array_equal(a.xyz, b.xyz)
         np.testing.assert_allclose(a.point_time, b.point_time, atol=1e-6)
     assert [m.point.x for m in gt] == list(seq.ground_truth.xyz[:, 0])
+
+
+def test_frames_recorded_out_of_stamp_order_come_out_in_order(tmp_path: Path) -> None:
+    """Avia messages recorded 0.35 s late (record time != header stamp) are re-ordered."""
+    from rosbags.rosbag2 import Writer
+
+    from clusterfilter_ros.io.pointcloud2 import frame_to_pointcloud2, seconds_to_stamp
+
+    store = typestore_for(2)
+    types = store.types
+    seq = _sequence(6)
+    path = tmp_path / "late"
+    with Writer(path, version=9) as writer:
+        conns = {
+            s: writer.add_connection(f"/livox/{s}", "sensor_msgs/msg/PointCloud2", typestore=store)
+            for s in (AVIA, MID360)
+        }
+        for frame in seq.frames:
+            sec, nsec = seconds_to_stamp(frame.stamp)
+            header = types["std_msgs/msg/Header"](
+                stamp=types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id="l"
+            )
+            msg = frame_to_pointcloud2(
+                frame,
+                types["sensor_msgs/msg/PointCloud2"],
+                types["sensor_msgs/msg/PointField"],
+                header,
+            )
+            delay = 0.35 if frame.sensor == AVIA else 0.0
+            record_ns = int(round((frame.stamp + delay) * 1e9))
+            raw = bytes(store.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
+            writer.write(conns[frame.sensor], record_ns, raw)
+    lazy = list(iter_bag_frames(path))
+    assert [(f.sensor, f.stamp) for f in lazy] == [(f.sensor, f.stamp) for f in seq.frames]
+    assert [len(f) for f in read_bag(path).frames] == [len(f) for f in seq.frames]
