@@ -1,5 +1,8 @@
 """ROS 2 adapters: the rclpy detector node, replay and recording.
 
-Modules that import rclpy do so at module level only in ``node``/``replay``/``record``;
-``node_params`` is ROS-free so the CLI and YAML generation can use it without ROS.
+Import rclpy (or ROS messages) at module level: ``node``, ``replay``, ``record``,
+``stamps``. ROS-free, usable without ROS installed: ``node_params`` (the node's
+parameter definitions), ``merge`` (stamp-ordered merge of the lidar streams),
+``transforms`` (extrinsics) and ``processes`` (starting the node, replay and recorder
+as separate processes for the demo and tests).
 """
