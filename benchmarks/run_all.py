@@ -39,29 +39,42 @@ from benchlib import (  # noqa: E402
     markdown_table,
 )
 
-#: Benchmarks in run order: (name, script, seconds allowed full, seconds allowed quick).
-#: Scripts written by other parts of the project are run when present.
-SUITE: list[tuple[str, str, int, int]] = [
-    ("core", "bench_core.py", 420, 90),
-    ("side_by_side", "bench_side_by_side.py", 300, 90),
-    ("node", "bench_node.py", 180, 90),
-    ("memory", "bench_memory.py", 600, 90),
-    ("detector", "bench_detector.py", 240, 90),
-    ("simulate", "bench_simulate.py", 120, 60),
-    ("io", "bench_io.py", 120, 60),
+#: Benchmarks in run order: (name, script, extra arguments, seconds allowed in a full
+#: run, seconds allowed in a quick run, part of the default suite). Scripts written by
+#: other parts of the project are run when present. ``memory_1h`` (the full hour, ~15+
+#: minutes on its own) runs only with ``--long`` or ``--only memory_1h``; its last
+#: results are kept in results.json and rendered with the rest.
+SUITE: list[tuple[str, str, tuple[str, ...], int, int, bool]] = [
+    ("core", "bench_core.py", (), 480, 90, True),
+    ("side_by_side", "bench_side_by_side.py", (), 300, 90, True),
+    ("node", "bench_node.py", (), 180, 90, True),
+    ("memory", "bench_memory.py", ("--budget", "240"), 420, 90, True),
+    ("detector", "bench_detector.py", (), 240, 90, True),
+    ("simulate", "bench_simulate.py", (), 120, 60, True),
+    ("io", "bench_io.py", (), 120, 60, True),
+    (
+        "memory_1h",
+        "bench_memory.py",
+        ("--minutes", "60", "--budget", "0", "--table-suffix", "_1h"),
+        3600,
+        0,
+        False,
+    ),
 ]
 
 DOC_PATH = REPO_DIR / "BENCHMARKS.md"
 DEFAULT_OUT = BENCH_DIR / "results"
 
 
-def run_benchmark(name: str, script: str, out: Path, quick: bool, timeout: int) -> dict[str, Any]:
+def run_benchmark(
+    name: str, script: str, extra: tuple[str, ...], out: Path, quick: bool, timeout: int
+) -> dict[str, Any]:
     """Run one benchmark script in a child process; return its result (or the failure)."""
     path = BENCH_DIR / script
     json_path = out / f"{name}.json"
     if json_path.exists():
         json_path.unlink()
-    cmd = [sys.executable, str(path)]
+    cmd = [sys.executable, str(path), *extra]
     if quick:
         cmd.append("--quick")
     accepts_json = "--json" in path.read_text()
@@ -92,7 +105,9 @@ def run_benchmark(name: str, script: str, out: Path, quick: bool, timeout: int) 
             "returncode": returncode,
             "wall_seconds": seconds,
             "command": result.get("command")
-            or f"python benchmarks/{script}" + (" --quick" if quick else ""),
+            or " ".join(
+                ["python", f"benchmarks/{script}", *extra] + (["--quick"] if quick else [])
+            ),
         }
     )
     if returncode != 0:
@@ -223,15 +238,21 @@ def save_plots(results: list[dict[str, Any]], out: Path) -> list[Path]:
     rates = core.get("streaming_rates")
     if rates:
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-        mult = [r["rate"] for r in rates]
-        ax1.semilogx(mult, [r["p50_ms"] for r in rates], "o-", label="p50")
-        ax1.semilogx(mult, [r["p95_ms"] for r in rates], "s-", label="p95")
-        ax1.semilogx(mult, [r["mean_ms"] for r in rates], "^-", label="mean")
+        for key, style, name in (
+            ("streaming_rates", "-", "simulated"),
+            ("streaming_rates_full", "--", "full rows"),
+        ):
+            runs = core.get(key) or []
+            if not runs:
+                continue
+            mult = [r["rate"] for r in runs]
+            ax1.semilogx(mult, [r["p50_ms"] for r in runs], "o" + style, label=f"{name} p50")
+            ax1.semilogx(mult, [r["mean_ms"] for r in runs], "^" + style, label=f"{name} mean")
+            ax2.loglog(mult, [r["load"] for r in runs], "o" + style, label=name)
         ax1.set_xlabel("input rate (x real time)")
         ax1.set_ylabel("push() time per frame (ms)")
         ax1.grid(True, which="both", alpha=0.3)
-        ax1.legend()
-        ax2.loglog(mult, [r["load"] for r in rates], "o-")
+        ax1.legend(fontsize=8)
         ax2.axhline(1.0, color="red", ls="--", lw=1, label="falls behind")
         ax2.set_xlabel("input rate (x real time)")
         ax2.set_ylabel("processing s per stream s")
@@ -240,16 +261,22 @@ def save_plots(results: list[dict[str, Any]], out: Path) -> list[Path]:
         fig.suptitle("Streaming detector, both lidars")
         save(fig, "streaming_rates.png")
 
-    memory = by_name.get("memory", {})
-    if memory.get("rss_mb"):
+    for key, png in (("memory", "memory_rss.png"), ("memory_1h", "memory_rss_1h.png")):
+        memory = by_name.get(key, {})
+        if not memory.get("rss_mb"):
+            continue
         fig, ax = plt.subplots(figsize=(6.5, 4))
-        ax.plot(memory["minute"], memory["rss_mb"], "-", lw=1.2)
+        ax.plot(memory["minute"], memory["rss_mb"], "-", lw=1.2, label="process RSS")
+        if memory.get("state_mb"):
+            ax.plot(memory["minute"], memory["state_mb"], "-", lw=1.0, label="detector state")
+        ax.axhline(500, color="red", ls="--", lw=1, label="target 500 MB")
         ax.set_xlabel("stream time (min)")
-        ax.set_ylabel("RSS (MB)")
+        ax.set_ylabel("MB")
         ax.set_ylim(bottom=0)
         ax.grid(True, alpha=0.3)
-        ax.set_title("Streaming detector memory over a long stream")
-        save(fig, "memory_rss.png")
+        ax.legend()
+        ax.set_title("Streaming detector memory, full-rate simulated stream")
+        save(fig, png)
 
     node = by_name.get("node", {})
     if node.get("latency_ms"):
@@ -296,34 +323,47 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="results folder")
     parser.add_argument("--only", default="", help="comma-separated benchmark names")
     parser.add_argument("--doc", type=Path, default=None, help="Markdown file to rewrite")
+    parser.add_argument(
+        "--long", action="store_true", help="also the 1-hour memory run (memory_1h)"
+    )
     args = parser.parse_args(argv)
     out = (args.out or DEFAULT_OUT).resolve()
     out.mkdir(parents=True, exist_ok=True)
     doc_path = args.doc or (out / "BENCHMARKS.md" if args.quick else DOC_PATH)
     wanted = {n.strip() for n in args.only.split(",") if n.strip()}
-    unknown = wanted - {name for name, *_ in SUITE}
+    unknown = wanted - {entry[0] for entry in SUITE}
     if unknown:
         parser.error(f"unknown benchmark(s): {', '.join(sorted(unknown))}")
 
     info = machine_info()
     tic = time.perf_counter()
     results: list[dict[str, Any]] = []
-    for name, script, full_timeout, quick_timeout in SUITE:
+    for name, script, extra, full_timeout, quick_timeout, default in SUITE:
         if wanted and name not in wanted:
+            continue
+        if not wanted and not default and not (args.long and not args.quick):
             continue
         if not (BENCH_DIR / script).exists():
             print(f"[run_all] {name}: {script} not present, skipped", flush=True)
             continue
         timeout = quick_timeout if args.quick else full_timeout
-        results.append(run_benchmark(name, script, out, args.quick, timeout))
+        results.append(run_benchmark(name, script, extra, out, args.quick, timeout))
 
     merged_path = out / "results.json"
     previous: dict[str, Any] = {}
-    if wanted and merged_path.exists():
-        # A partial run keeps the other benchmarks' last results.
-        previous = {r["benchmark"]: r for r in json.loads(merged_path.read_text())["results"]}
+    if merged_path.exists():
+        # A partial run keeps the other benchmarks' last results; a full run keeps only
+        # those of benchmarks outside the default suite (memory_1h).
+        defaults = {entry[0] for entry in SUITE if entry[5]}
+        old = json.loads(merged_path.read_text())
+        if bool(old.get("quick")) == args.quick:
+            previous = {
+                r["benchmark"]: r
+                for r in old["results"]
+                if wanted or r["benchmark"] not in defaults
+            }
     previous.update({r["benchmark"]: r for r in results})
-    merged = [previous[n] for n, *_ in SUITE if n in previous]
+    merged = [previous[entry[0]] for entry in SUITE if entry[0] in previous]
     merged_path.write_text(
         json.dumps({"machine": info, "quick": args.quick, "results": merged}, indent=1, default=str)
     )
