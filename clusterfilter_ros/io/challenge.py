@@ -25,6 +25,7 @@ import numpy as np
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame, Sequence, TimedPositions
 from clusterfilter_ros.errors import InputError
 from clusterfilter_ros.io.atomic import atomic_output_dir
+from clusterfilter_ros.io.pointcloud2 import finite_rows
 
 #: Challenge sub-folder name -> canonical sensor name.
 SENSOR_FOLDERS: dict[str, str] = {"lidar_360": MID360, "livox_avia": AVIA}
@@ -35,6 +36,8 @@ GROUND_TRUTH_FOLDER = "ground_truth"
 REAL_PAD_ROWS: dict[str, list[int]] = {MID360: [19968, 20064], AVIA: [24000]}
 
 _STAMP_RE = re.compile(r"^\d+(\.\d*)?$")
+#: First bytes of every .npy file.
+_NPY_MAGIC = b"\x93NUMPY"
 
 
 @dataclass(frozen=True)
@@ -148,6 +151,14 @@ def list_lidar_files(
 def load_npy(path: Path) -> np.ndarray:
     """``np.load`` with every failure turned into a one-line :class:`InputError`."""
     try:
+        with open(path, "rb") as fh:
+            magic = fh.read(len(_NPY_MAGIC))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if magic != _NPY_MAGIC:
+        what = "empty file" if not magic else "no .npy header"
+        raise InputError(f"{path}: not a .npy file ({what}; corrupt or wrongly named?)")
+    try:
         arr = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -160,14 +171,14 @@ def load_npy(path: Path) -> np.ndarray:
 def valid_rows(xyz: np.ndarray) -> np.ndarray:
     """Boolean mask of rows that are real points: not all-zero padding and all finite.
 
-    Computed as ``|x| + |y| + |z|`` being finite and non-zero, which is several times
-    faster than ``isfinite(...).all(1) & (... != 0).any(1)`` on (N, 3) arrays. A row whose
-    sum overflows (coordinates near the dtype's maximum) counts as non-finite.
+    Column-wise tests (finite; ``|x| + |y| + |z| != 0``) are several times faster than
+    ``isfinite(...).all(1) & (... != 0).any(1)`` on (N, 3) arrays.
     """
-    a = np.abs(xyz)
-    total = a[:, 0] + a[:, 1]
-    total += a[:, 2]
-    return np.isfinite(total) & (total != 0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a = np.abs(xyz)
+        total = a[:, 0] + a[:, 1]
+        total += a[:, 2]  # may overflow to inf for huge finite values: still != 0
+    return finite_rows(xyz) & (total != 0)
 
 
 def load_lidar_file(path: Path, sensor: str, stamp: float | None = None) -> Frame:

@@ -276,15 +276,10 @@ def cloud_fields_to_arrays(
 def finite_rows(xyz: np.ndarray) -> np.ndarray:
     """Mask of (N, 3) rows whose coordinates are all finite.
 
-    ``x + y + z`` is finite exactly when all three are, except that a sum overflowing
-    the dtype (coordinates near its maximum, ~3e38 m for float32) also counts as
-    non-finite. Three column operations are several times faster than
-    ``np.isfinite(xyz).all(axis=1)``.
+    Three column tests are ~10x faster than ``np.isfinite(xyz).all(axis=1)`` (a
+    reduction over a length-3 axis is slow in numpy).
     """
-    with np.errstate(over="ignore", invalid="ignore"):
-        total = xyz[:, 0] + xyz[:, 1]
-        total += xyz[:, 2]
-    return np.isfinite(total)
+    return np.isfinite(xyz[:, 0]) & np.isfinite(xyz[:, 1]) & np.isfinite(xyz[:, 2])
 
 
 def _point_time_seconds(

@@ -91,6 +91,11 @@ def test_nonfinite_and_zero_rows_dropped(tmp_path: Path) -> None:
     seq = read_sequence_folder(tmp_path / "s")
     np.testing.assert_array_equal(seq.frames[0].xyz, [[1, 2, 3], [0, 0, 5]])
     assert seq.ground_truth is None
+    # huge but float32-finite coordinates are points (their sum overflowing changes nothing)
+    big = np.array([[3e38, 3e38, -3e38], [0, 0, 0]])
+    _write_raw(tmp_path / "s" / "lidar_360", "11.5.npy", big)
+    frame = read_sequence_folder(tmp_path / "s").frames[1]
+    np.testing.assert_array_equal(frame.xyz, big[:1].astype(np.float32))
 
 
 def _synthetic_sequence(n: int = 6) -> Sequence:
