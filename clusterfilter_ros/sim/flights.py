@@ -200,27 +200,49 @@ def avia_only_flight(rng: np.random.Generator, duration: float, size: float) -> 
 
 
 def long_mixed_flight(rng: np.random.Generator, duration: float, size: float) -> list[Waypoint]:
-    """Take-off, passes, hover, out beyond sensor range and back, overhead, landing."""
+    """Take-off, passes, hover, out beyond sensor range and back, overhead, landing.
+
+    Longer durations get random manoeuvres (:func:`mixed_manoeuvres`) before the landing.
+    """
     pad = _pad(size)
-    p = _rotated(rng, [(30.0, 20.0, 15.0), (-25.0, 30.0, 20.0), (15.0, -25.0, 10.0)], 20.0)
+    p = _rotated(rng, [(30.0, 20.0, 15.0), (-25.0, 30.0, 20.0)], 20.0)
     a = rng.uniform(-math.pi, math.pi)
-    far = (150.0 * math.cos(a), 150.0 * math.sin(a), GROUND_Z + 55.0)
-    plan = [
+    far = (130.0 * math.cos(a), 130.0 * math.sin(a), GROUND_Z + 55.0)
+    start = [
         Waypoint(pad, hold=3.0),
         Waypoint((pad[0], pad[1], GROUND_Z + 12.0), speed=3.0),
         Waypoint(p[0], speed=7.0),
         Waypoint(p[1], hold=6.0, speed=8.0),
         Waypoint((far[0] * 0.3, far[1] * 0.3, GROUND_Z + 40.0), speed=10.0),
-        Waypoint(far, hold=5.0, speed=12.0),
+        Waypoint(far, hold=4.0, speed=12.0),
         Waypoint((far[0] * 0.3, far[1] * 0.3, GROUND_Z + 45.0), speed=12.0),
         Waypoint((0.0, 3.0, GROUND_Z + 70.0), speed=8.0),
-        Waypoint(p[2], speed=10.0),
         Waypoint((-30.0, -10.0, GROUND_Z + 14.0), speed=12.0),
-        Waypoint((20.0, 10.0, GROUND_Z + 18.0), hold=5.0, speed=9.0),
-        Waypoint((pad[0], pad[1], GROUND_Z + 8.0), speed=5.0),
-        Waypoint(pad, hold=5.0, speed=1.5),
+        Waypoint((20.0, 10.0, GROUND_Z + 18.0), hold=4.0, speed=9.0),
     ]
-    return _continue(rng, plan, duration)
+    landing = [
+        Waypoint((pad[0], pad[1], GROUND_Z + 8.0), speed=5.0),
+        Waypoint(pad, hold=max(duration, 5.0), speed=1.5),
+    ]
+    remaining = duration - _estimate_duration(start + landing[:1], 6.0) - 8.0
+    if remaining > 20.0:
+        start += mixed_manoeuvres(rng, start[-1].position, remaining)
+    return _fit_before_landing(start, landing, duration)
+
+
+def _fit_before_landing(
+    start: list[Waypoint], landing: list[Waypoint], duration: float
+) -> list[Waypoint]:
+    """Drop legs before the landing until the drone is down by the end of ``duration``."""
+    from clusterfilter_ros.sim.trajectory import Path
+
+    keep = len(start)
+    while keep > 3:
+        path = Path(start[:keep] + landing, max_speed=12.0, max_acceleration=4.0)
+        if path.knot_times[-2] <= duration - 2.0:
+            break
+        keep -= 1
+    return start[:keep] + landing
 
 
 # --- distractors -------------------------------------------------------------------

@@ -94,7 +94,18 @@ class Path:
             stretch[is_hold] = 1.0
             if np.all(stretch <= 1.0 + 1e-3):
                 break
-            durations = durations * np.minimum(np.maximum(stretch, 1.0) ** 0.7 * 1.01, 3.0)
+            grow = stretch > 1.0 + 1e-3
+            durations = np.where(grow, durations * np.minimum(stretch**0.7 * 1.01, 3.0), durations)
+        for _ in range(10):  # safety net: stretch every moving leg uniformly
+            velocities = self._knot_velocities(durations, cruise)
+            peak_v, peak_a = self._segment_peaks(durations, velocities)
+            factor = max(
+                float(np.max(peak_v[~is_hold] / max_speed, initial=0.0)),
+                float(np.sqrt(np.max(peak_a[~is_hold] / max_acceleration, initial=0.0))),
+            )
+            if factor <= 1.0:
+                break
+            durations = np.where(is_hold, durations, durations * factor * 1.01)
         self.durations = durations
         self.velocities = self._knot_velocities(durations, cruise)
         self.knot_times = start_time + np.concatenate([[0.0], np.cumsum(durations)])
