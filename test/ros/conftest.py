@@ -78,6 +78,7 @@ class Rig:
     def __init__(self, context, overrides: dict | None = None) -> None:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
+        from nav_msgs.msg import Path as PathMsg
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
 
@@ -90,6 +91,8 @@ class Rig:
         self.client = rclpy.create_node("test_client", context=context)
         self.replayer = Replayer(self.client)
         self.recorder = PoseRecorder(self.client, points_topic="/uav/points")
+        self.paths: list[PathMsg] = []
+        self.client.create_subscription(PathMsg, "/uav/path", self.paths.append, OUTPUT_QOS)
         self.diagnostics: list[DiagnosticArray] = []
         self.client.create_subscription(
             DiagnosticArray, "/diagnostics", self.diagnostics.append, OUTPUT_QOS
