@@ -19,10 +19,30 @@ from clusterfilter_ros.errors import InputError
 
 
 def _ensure_parent(path: Path) -> None:
+    for ancestor in reversed(path.parents):
+        if ancestor.exists() and not ancestor.is_dir():
+            raise InputError(f"cannot write {path}: {ancestor} is a file, not a folder")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"cannot create folder {path.parent}: {exc.strerror or exc}") from exc
+
+
+def _output_error(target: Path, exc: OSError) -> InputError:
+    """A one-line error naming the output that could not be written."""
+    if target.is_dir():
+        return InputError(f"cannot write {target}: it is a folder")
+    return InputError(f"cannot write {target}: {exc.strerror or exc}")
+
+
+def _read_umask() -> int:
+    """The process umask (read once at import: os.umask briefly changes it for all threads)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
 
 
 @contextlib.contextmanager
@@ -36,14 +56,24 @@ def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterat
     """
     target = Path(path)
     _ensure_parent(target)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent
-    )
-    os.close(fd)
+    if target.is_dir():
+        raise InputError(f"cannot write {target}: it is a folder")
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent
+        )
+        # mkstemp makes the file private (0600); give the result the usual permissions.
+        os.fchmod(fd, 0o666 & ~_UMASK)
+        os.close(fd)
+    except OSError as exc:
+        raise _output_error(target, exc) from exc
     tmp = Path(tmp_name)
     try:
         yield tmp
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise _output_error(target, exc) from exc
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
@@ -82,7 +112,11 @@ def atomic_output_dir(
         if not target.is_dir() or any(target.iterdir()):
             raise InputError(f"output {target} already exists (choose another path or remove it)")
     _ensure_parent(target)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+        os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp makes it private (0700)
+    except OSError as exc:
+        raise InputError(f"cannot write {target}: {exc.strerror or exc}") from exc
     if not create:
         tmp.rmdir()
     try:

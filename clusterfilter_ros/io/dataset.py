@@ -148,6 +148,23 @@ def iter_input_frames(
     return bags.iter_bag_frames(p, **_bag_kwargs(dict(topics=topics, sensors=sensors)))
 
 
+def require_frames(frames: Iterable[Frame], path: str | os.PathLike[str]) -> Iterator[Frame]:
+    """Pass ``frames`` through; raise :class:`InputError` naming ``path`` if there were none.
+
+    For commands that cannot do anything useful with a recording without lidar frames
+    (an empty ``lidar_360/`` folder, a bag whose lidar topics hold no messages).
+    """
+    n = 0
+    for frame in frames:
+        n += 1
+        yield frame
+    if n == 0:
+        raise InputError(
+            f"{path}: no lidar frames (empty lidar_360/ and livox_avia/ folders, "
+            "or no messages on the lidar topics)"
+        )
+
+
 def write_output(
     seq: Sequence,
     path: str | os.PathLike[str],

@@ -46,7 +46,11 @@ def _column_array(values: list[str]) -> np.ndarray:
 
 
 def read_positions_csv(path: str | os.PathLike[str]) -> TimedPositions:
-    """Read a ``timestamp,x,y,z[,extra...]`` CSV; extra columns go to ``.extra``."""
+    """Read a ``timestamp,x,y,z[,extra...]`` CSV; extra columns go to ``.extra``.
+
+    A timestamp that is not a finite number is an :class:`InputError` naming the line;
+    rows whose x, y or z is NaN/Inf are dropped (no position).
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8-sig")  # tolerate a BOM (spreadsheet exports)
@@ -82,6 +86,12 @@ def read_positions_csv(path: str | os.PathLike[str]) -> TimedPositions:
             raise InputError(
                 f"{p}: column {header[idx]!r} has a non-numeric value ({exc})"
             ) from exc
+    bad_time = np.flatnonzero(~np.isfinite(numeric["t"]))
+    if bad_time.size:
+        raise InputError(
+            f"{p}: line {int(bad_time[0]) + 2}: timestamp {columns[time_col][bad_time[0]]!r} "
+            "is not a finite number"
+        )
     used = {time_col, header.index("x"), header.index("y"), header.index("z")}
     extra = {
         rows[0][i].strip(): _column_array(list(columns[i]))
@@ -89,6 +99,13 @@ def read_positions_csv(path: str | os.PathLike[str]) -> TimedPositions:
         if i not in used
     }
     xyz = np.stack([numeric["x"], numeric["y"], numeric["z"]], axis=1) if body else np.empty((0, 3))
+    # Rows without a finite position (NaN/Inf) say "no position": dropped, like the
+    # ground_truth/ folder reader does.
+    finite = np.isfinite(xyz).all(axis=1)
+    if not finite.all():
+        return TimedPositions(
+            numeric["t"][finite], xyz[finite], {k: v[finite] for k, v in extra.items()}
+        )
     return TimedPositions(numeric["t"], xyz, extra)
 
 
