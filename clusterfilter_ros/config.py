@@ -58,8 +58,9 @@ def load_params_file(path: str | Path) -> dict[str, Any]:
         data = yaml.safe_load(path.read_text())
     except FileNotFoundError:
         raise InputError(f"params file {path} does not exist") from None
-    except (OSError, yaml.YAMLError) as exc:
-        raise InputError(f"params file {path} is not readable YAML: {exc}") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        first_line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"params file {path} is not readable YAML: {first_line}") from None
     if data is None:
         return {}
     if not isinstance(data, dict):

@@ -14,7 +14,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from clusterfilter_ros import __version__
@@ -49,12 +51,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Subcommands (file readers/writers without rclpy) for which SIGTERM raises
+#: KeyboardInterrupt, so their atomic writers delete temporary files before exiting.
+#: rclpy-based subcommands keep rclpy's own SIGTERM handling.
+SIGTERM_AS_INTERRUPT = frozenset({"detect", "evaluate", "convert", "info", "simulate"})
+
+
+def _terminate(signum: int, frame: object) -> None:
+    """SIGTERM unwinds like Ctrl-C, so partial outputs are removed on the way out."""
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    if (
+        args.command in SIGTERM_AS_INTERRUPT
+        and threading.current_thread() is threading.main_thread()
+        and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    ):
+        signal.signal(signal.SIGTERM, _terminate)
     try:
         return int(args.func(args) or 0)
     except ClusterfilterError as exc:

@@ -75,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"output {out_path} already exists (use --overwrite to replace it)")
     select = input_kwargs_from_args(args)
     total = count_input_frames(args.input, **select)
+    if total == 0:
+        raise InputError(f"{args.input}: no lidar frames to convert")
     ground_truth = read_input_ground_truth(args.input, args.ground_truth_topic)
     frames = iter_input_frames(args.input, **select)
     if args.to == "mmaud":

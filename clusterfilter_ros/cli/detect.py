@@ -105,9 +105,9 @@ def detect_one(input_path: Path, mode: str, params, stamps, max_gap: float, prog
 
     from clusterfilter_ros.core.evaluation import interpolate_predictions
     from clusterfilter_ros.core.frame import TimedPositions
-    from clusterfilter_ros.io.dataset import iter_input_frames
+    from clusterfilter_ros.io.dataset import iter_input_frames, require_frames
 
-    frames = iter_input_frames(input_path)
+    frames = require_frames(iter_input_frames(input_path), input_path)
     if progress:
         from tqdm import tqdm
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -61,8 +62,11 @@ def run(args: argparse.Namespace) -> int:
     from clusterfilter_ros.errors import InputError
     from clusterfilter_ros.io.groundtruth import read_positions_csv
 
-    if args.max_gap <= 0 or args.hit_radius <= 0:
-        raise InputError("--max-gap and --hit-radius must be positive")
+    for option, value in (("--max-gap", args.max_gap), ("--hit-radius", args.hit_radius)):
+        if not math.isfinite(value) or value <= 0:
+            raise InputError(f"{option} must be a positive number, got {value}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise InputError(f"--duration must be a positive number of seconds, got {args.duration}")
     pred = read_positions_csv(args.pred)
     gt, duration = load_truth(args.gt)
     if args.duration is not None:

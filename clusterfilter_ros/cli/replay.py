@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from clusterfilter_ros.errors import ClusterfilterError
 
@@ -51,8 +52,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.rate < 0:
-        raise ClusterfilterError(f"--rate must be >= 0, got {args.rate}")
+    if not math.isfinite(args.rate) or args.rate < 0:
+        raise ClusterfilterError(f"--rate must be a number >= 0, got {args.rate}")
+    if not math.isfinite(args.wait) or args.wait < 0:
+        raise ClusterfilterError(f"--wait must be a number of seconds >= 0, got {args.wait}")
     from clusterfilter_ros.dds import apply_loopback_defaults
     from clusterfilter_ros.io.dataset import open_input
 

@@ -69,10 +69,10 @@ def run(args: argparse.Namespace) -> int:
         return 0
     import math
 
-    import numpy as np
     from tqdm import tqdm
 
     from clusterfilter_ros.errors import InputError, ParameterError
+    from clusterfilter_ros.io.atomic import atomic_output_path
     from clusterfilter_ros.io.dataset import write_output_frames
     from clusterfilter_ros.sim.preview import PreviewCollector, draw_preview
     from clusterfilter_ros.sim.scenarios import PAD_ROWS, Simulation
@@ -131,28 +131,19 @@ def run(args: argparse.Namespace) -> int:
         )
     drone_truth = sim.drone_truth()
     if args.truth:
-        np.savez_compressed(
-            args.truth,
-            stamps=drone_truth.stamps,
-            xyz=drone_truth.xyz,
-            frame_stamps=np.array([c[0] for c in counts]),
-            frame_sensors=np.array([c[1] for c in counts]),
-            frame_points=np.array([c[2] for c in counts]),
-            frame_drone_points=np.array([c[3] for c in counts]),
-            prism_offset=sim.prism_offset,
-            scenario=args.scenario,
-            seed=args.seed,
-        )
+        with atomic_output_path(args.truth, suffix=".npz") as tmp_truth:
+            _save_truth(tmp_truth, args, sim, drone_truth, counts)
     if collector is not None:
         model = sim.drone.model.name if sim.drone is not None else "no drone"
-        draw_preview(
-            args.preview,
-            collector,
-            drone_truth,
-            ground_truth,
-            {s.sensor: s.origin for s in sim.sensors},
-            f"{args.scenario} (seed {args.seed}, {sim.duration:g} s, {model})",
-        )
+        with atomic_output_path(args.preview, suffix=".png") as tmp_preview:
+            draw_preview(
+                tmp_preview,
+                collector,
+                drone_truth,
+                ground_truth,
+                {s.sensor: s.origin for s in sim.sensors},
+                f"{args.scenario} (seed {args.seed}, {sim.duration:g} s, {model})",
+            )
     drone_pts = sum(c[3] for c in counts)
     print(
         f"simulate: wrote {len(counts)} frames ({drone_pts} drone points) and "
@@ -160,3 +151,21 @@ def run(args: argparse.Namespace) -> int:
         + (f"; preview {args.preview}" if args.preview else "")
     )
     return 0
+
+
+def _save_truth(path, args: argparse.Namespace, sim, drone_truth, counts) -> None:
+    """The dense drone truth and per-frame drone point counts as one .npz file."""
+    import numpy as np
+
+    np.savez_compressed(
+        path,
+        stamps=drone_truth.stamps,
+        xyz=drone_truth.xyz,
+        frame_stamps=np.array([c[0] for c in counts]),
+        frame_sensors=np.array([c[1] for c in counts]),
+        frame_points=np.array([c[2] for c in counts]),
+        frame_drone_points=np.array([c[3] for c in counts]),
+        prism_offset=sim.prism_offset,
+        scenario=args.scenario,
+        seed=args.seed,
+    )
