@@ -128,7 +128,7 @@ def fmt(value: Any, digits: int = 3) -> str:
 
 
 def target_row(
-    name: str, target: str, measured: float | None, passed: bool | None, unit: str = ""
+    name: str, target: str, measured: float | str | None, passed: bool | None, unit: str = ""
 ) -> dict[str, Any]:
     """One target check for BENCHMARKS.md (``passed`` None = not measured)."""
     return {

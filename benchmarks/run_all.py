@@ -138,7 +138,14 @@ def render_targets(results: list[dict[str, Any]], machine: str) -> dict[str, Any
     rows = []
     for res in results:
         for t in res.get("targets", []):
-            status = {True: "PASS", False: "MISS", None: "not measured"}[t["passed"]]
+            if t["passed"] is not None:
+                status = "PASS" if t["passed"] else "MISS"
+            elif t["measured"] is None:
+                status = "not measured"
+            elif res.get("quick"):
+                status = "quick run, not checked"
+            else:
+                status = "reported"
             measured = t["measured"]
             measured_text = fmt(measured) + (f" {t['unit']}" if t.get("unit") else "")
             rows.append([t["name"], t["target"], measured_text, status, f"`{res['command']}`"])
