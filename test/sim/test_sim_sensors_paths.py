@@ -62,7 +62,7 @@ def test_return_model_matches_the_data_sheet_points():
     assert m.detection_range(np.array(0.1)) == pytest.approx(40.0)
     assert m.detection_range(np.array(0.8)) == pytest.approx(70.0)
     assert a.detection_range(np.array(0.1)) == pytest.approx(190.0)
-    assert a.detection_range(np.array(0.8)) == pytest.approx(450.0)
+    assert a.detection_range(np.array(0.8)) == pytest.approx(320.0)
     r = np.array([5.0, 30.0, 45.0, 60.0, 90.0])
     one = np.ones_like(r)
     p = m.return_probability(r, 0.2 * one, one, 0 * one)
