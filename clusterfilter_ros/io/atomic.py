@@ -51,7 +51,9 @@ def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterat
 
     The caller writes the complete file to the yielded path (by any means: ``np.save``,
     ``open``, a library writer). When the ``with`` block exits normally the file replaces
-    ``path`` atomically; on an exception it is deleted and ``path`` is unchanged.
+    ``path`` atomically; on an exception it is deleted and ``path`` is unchanged. An
+    :class:`OSError` while writing or moving (disk full, the target is a folder) becomes
+    an :class:`InputError` naming ``path``.
     ``suffix`` is appended to the temporary name (some writers insist on an extension).
     """
     target = Path(path)
@@ -69,10 +71,10 @@ def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterat
         raise _output_error(target, exc) from exc
     tmp = Path(tmp_name)
     try:
-        yield tmp
         try:
+            yield tmp
             os.replace(tmp, target)
-        except OSError as exc:
+        except OSError as exc:  # disk full, quota, target became a folder, ...
             raise _output_error(target, exc) from exc
     except BaseException:
         with contextlib.suppress(OSError):
