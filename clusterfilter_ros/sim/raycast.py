@@ -332,8 +332,9 @@ def _pair_distances(
         prim = pair_prim[sel]
         ray = pair_ray[sel]
         centre = table.centre[prim]
-        if moving.any():
-            centre = centre + table.velocity[prim] * ray_time[ray, None]
+        mv = np.flatnonzero(moving[prim])
+        if len(mv):
+            centre[mv] += table.velocity[prim[mv]] * ray_time[ray[mv], None]
         d = dirs[ray]
         half = table.half[prim]
         if k == BOX:

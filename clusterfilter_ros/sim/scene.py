@@ -124,7 +124,7 @@ def _add_tree(
 #: centre is from the Avia's vertical axis. The branch's edge grazes the Avia's cone, so
 #: as it sways the Avia sees from none to ~150 leaf returns a frame, as in MMAUD.
 RIG_TREE_XY = (6.5, 4.0)
-RIG_BRANCH_DISTANCE = 6.15
+RIG_BRANCH_DISTANCE = 6.25
 _AVIA_XYZ = (0.05, 0.25, 0.12)
 
 
