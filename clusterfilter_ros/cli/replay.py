@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from clusterfilter_ros.cli._input_args import add_input_options, input_kwargs_from_args
 from clusterfilter_ros.errors import ClusterfilterError
 
 
@@ -27,9 +28,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--avia-topic", default="/livox/avia", help="default: %(default)s")
     p.add_argument("--mid360-topic", default="/livox/mid360", help="default: %(default)s")
     p.add_argument(
-        "--ground-truth-topic",
+        "--gt-topic",
         default="/uav/ground_truth",
-        help="PointStamped topic for ground truth, '' for none (default: %(default)s)",
+        help="publish ground truth as PointStamped here, '' for none (default: %(default)s)",
     )
     p.add_argument("--ground-truth", help="ground truth CSV or folder replacing the input's own")
     p.add_argument(
@@ -48,6 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--no-wait", action="store_true", help="start at once, even with nobody subscribed"
     )
+    add_input_options(p)
     p.set_defaults(func=run)
 
 
@@ -59,7 +61,12 @@ def run(args: argparse.Namespace) -> int:
     from clusterfilter_ros.dds import apply_loopback_defaults
     from clusterfilter_ros.io.dataset import open_input
 
-    sequence = open_input(args.input, ground_truth=args.ground_truth)
+    sequence = open_input(
+        args.input,
+        ground_truth=args.ground_truth,
+        ground_truth_topic=args.ground_truth_topic,
+        **input_kwargs_from_args(args),
+    )
     if not sequence.frames:
         raise ClusterfilterError(f"{args.input}: no lidar frames to replay")
     apply_loopback_defaults()
@@ -76,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         replayer = Replayer(
             node,
             topics={AVIA: args.avia_topic, MID360: args.mid360_topic},
-            ground_truth_topic=args.ground_truth_topic or None,
+            ground_truth_topic=args.gt_topic or None,
         )
         if not args.no_wait:
             print(f"replay: waiting up to {args.wait:g} s for subscribers ...", flush=True)

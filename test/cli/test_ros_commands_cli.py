@@ -93,3 +93,28 @@ def test_short_demo_writes_outputs(tmp_path, ros_env):
     assert (out / "estimates.csv").read_text().startswith("timestamp,x,y,z")
     assert "trajectory plot" in proc.stdout
     assert "stopping: received" in (out / "logs" / "detector.log").read_text()
+
+
+@pytest.mark.ros
+def test_replay_reads_a_ros2_bag(tmp_path, ros_env):
+    import numpy as np
+
+    from clusterfilter_ros.core.frame import Frame, Sequence, TimedPositions
+    from clusterfilter_ros.io.dataset import write_output
+
+    frames = [
+        Frame(10.0 + 0.1 * i, sensor, np.full((5, 3), i, np.float32))
+        for i in range(5)
+        for sensor in ("avia", "mid360")
+    ]
+    gt = TimedPositions([10.0, 10.2], [[1.0, 2.0, 3.0], [1.0, 2.0, 3.5]])
+    bag = write_output(Sequence("s", frames, gt), tmp_path / "bag", fmt="rosbag2")
+    proc = subprocess.run(
+        processes.cli_command("replay", str(bag), "--no-wait", "--rate", "0"),
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "published {'avia': 5, 'mid360': 5} frames and 2 ground-truth points" in proc.stdout
