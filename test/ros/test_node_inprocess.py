@@ -174,6 +174,15 @@ def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_
     assert float(values["processing_ms_mean"]) > 0
     assert "detector_accumulator_voxels" in values
 
+    # An empty cloud is a valid frame (nothing seen), not an error.
+    from clusterfilter_ros.core.frame import Frame
+    from clusterfilter_ros.io.pointcloud2 import make_pointcloud2
+
+    before = rig.detector.counters()["processed"]
+    empty = Frame(stamp=200.0, sensor="mid360", xyz=np.empty((0, 3), np.float32))
+    rig.replayer.publishers["mid360"].publish(make_pointcloud2(empty, "mid360"))
+    assert wait_for(lambda: rig.detector.counters()["processed"] == before + 1, 10.0)
+    assert rig.detector.counters()["rejected"]["mid360"] == 0
     # A cloud whose bytes are shorter than width * point_step: rejected, counted, no crash.
     bad = PointCloud2(height=1, width=100, point_step=12, row_step=1200, is_dense=True)
     bad.fields = [
