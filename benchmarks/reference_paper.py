@@ -117,11 +117,15 @@ def _frame_points(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray]:
     return xyz, times
 
 
+def _point_voxel_keys(xyz: np.ndarray, voxel_size: float) -> np.ndarray:
+    """One int64 key per point: its voxel's integer indices packed into 21 bits each."""
+    ijk = np.floor(xyz / voxel_size).astype(np.int64) + (1 << 20)
+    return (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+
+
 def _voxel_keys(xyz: np.ndarray, voxel_size: float) -> np.ndarray:
     """Unique occupied voxel keys (one int64 per voxel) of a point set."""
-    ijk = np.floor(xyz / voxel_size).astype(np.int64) + (1 << 20)
-    keys = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
-    return np.unique(keys)
+    return np.unique(_point_voxel_keys(xyz, voxel_size))
 
 
 def estimated_dbscan_gb(xyz: np.ndarray, eps: float, sample: int = 1000) -> float:
@@ -144,27 +148,34 @@ def estimated_dbscan_gb(xyz: np.ndarray, eps: float, sample: int = 1000) -> floa
 
 def dbscan_labels(
     xyz: np.ndarray, eps: float, min_samples: int, params: ReferenceParams
-) -> tuple[np.ndarray, str]:
-    """DBSCAN labels of every point (-1 noise) and the mode used (see module docstring)."""
+) -> tuple[np.ndarray, str, float]:
+    """DBSCAN labels of every point (-1 noise), the mode used (see module docstring) and
+    the seconds spent on the memory check (not part of the method: callers that time the
+    reference subtract it)."""
+    import time
+
     if len(xyz) == 0:
-        return np.empty(0, np.int64), "exact"
-    if estimated_dbscan_gb(xyz, eps) <= params.max_dbscan_gb:
-        return DBSCAN(eps=eps, min_samples=min_samples).fit_predict(xyz), "exact"
-    keys = np.floor(xyz / params.fallback_voxel).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        return np.empty(0, np.int64), "exact", 0.0
+    tic = time.perf_counter()
+    need_gb = estimated_dbscan_gb(xyz, eps)
+    check_s = time.perf_counter() - tic
+    if need_gb <= params.max_dbscan_gb:
+        return DBSCAN(eps=eps, min_samples=min_samples).fit_predict(xyz), "exact", check_s
+    keys = _point_voxel_keys(xyz, params.fallback_voxel)
+    _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     centroids = np.zeros((len(counts), 3))
     np.add.at(centroids, inverse, xyz)
     centroids /= counts[:, None]
     labels = DBSCAN(eps=eps, min_samples=min_samples).fit_predict(centroids, sample_weight=counts)
-    return labels[inverse], "voxel-weighted"
+    return labels[inverse], "voxel-weighted", check_s
 
 
 def denoise_avia(xyz: np.ndarray, params: ReferenceParams) -> np.ndarray:
     """Boolean mask of superimposed Avia points that DBSCAN does not call noise."""
     if len(xyz) == 0:
         return np.zeros(0, dtype=bool)
-    labels, _mode = dbscan_labels(xyz, params.avia_eps, params.avia_min_samples, params)
+    labels, _mode, _check = dbscan_labels(xyz, params.avia_eps, params.avia_min_samples, params)
     return labels >= 0
 
 
@@ -287,8 +298,9 @@ def reference_detect(
     tic = time.perf_counter()
     if len(xyz) == 0:
         return empty
-    labels, mode = dbscan_labels(xyz, params.eps, params.min_samples, params)
-    timings["global_dbscan"] = time.perf_counter() - tic
+    labels, mode, check_s = dbscan_labels(xyz, params.eps, params.min_samples, params)
+    timings["memory_check"] = check_s
+    timings["global_dbscan"] = time.perf_counter() - tic - check_s
 
     tic = time.perf_counter()
     order = np.argsort(labels, kind="stable")
