@@ -13,13 +13,15 @@ topic). A stamp earlier than the same lidar's previous one by more than
 ``backwards_tolerance`` (a looped bag, a restarted driver) starts a new *generation*:
 the buffers are cleared and the consumer is expected to reset its state. The other
 lidars' frames still in flight from before the jump (stamps not yet jumped back) are
-dropped until their stamps jump back too. Smaller steps back, duplicates, and frames
+dropped until their stamps jump back too, or until the jumped lidar's new stamps have
+caught up with them (a single glitched stamp). Smaller steps back, duplicates, and frames
 arriving after a later frame was already released are dropped and counted.
 """
 
 from __future__ import annotations
 
 import collections
+import math
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -112,8 +114,11 @@ class StampMerger:
         result = AddResult.QUEUED
         if sensor in self._awaiting_jump:
             # Another lidar jumped back; this one's frames still in flight from before
-            # the jump are stale until its own stamps jump back too.
-            if stamp >= self._awaiting_jump[sensor] - tol:
+            # the jump are stale until its own stamps jump back too, or until they fit
+            # the new timeline (the jump was one glitched stamp, and the other lidar is
+            # back at this one's time): else one bad stamp would mute this lidar for good.
+            newest = max(self._last_received.values(), default=-math.inf)
+            if stamp >= self._awaiting_jump[sensor] - tol and stamp > newest + tol:
                 return self._drop_late(sensor)
             del self._awaiting_jump[sensor]
         last = self._last_received.get(sensor)
