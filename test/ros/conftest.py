@@ -102,6 +102,8 @@ class Rig:
         self.executor.add_node(self.client)
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
+        # Best-effort clouds published before the detector's readers match go nowhere.
+        assert self.replayer.wait_for_subscribers(20.0, ["/uav/pose"], settle=0.2)
 
     def _spin(self) -> None:
         try:
