@@ -7,6 +7,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
+from clusterfilter_ros.cli import main  # noqa: E402
 from clusterfilter_ros.core.evaluation import evaluate  # noqa: E402
 from clusterfilter_ros.core.params import detector_params  # noqa: E402
 from clusterfilter_ros.core.streaming import run_streaming  # noqa: E402
@@ -75,6 +76,29 @@ def test_detector_replay_recorder_processes(tmp_path, ros_env, small_sequence):
     assert len(poses) == len(expected), report
     np.testing.assert_array_equal(poses.xyz, [e.position for e in expected])
     result = evaluate(poses, sequence.ground_truth)
+    # ... and the offline command's stream mode on the same folder, up to the
+    # nanosecond rounding of header stamps.
+    detect_csv = tmp_path / "detect.csv"
+    assert (
+        main(
+            [
+                "detect",
+                str(folder),
+                "--mode",
+                "stream",
+                "-o",
+                str(detect_csv),
+                "--quiet",
+                "--params-file",
+                str(config_file("detector.yaml")),
+            ]
+        )
+        == 0
+    )
+    offline = read_positions_csv(detect_csv)
+    assert len(offline) == len(poses)
+    np.testing.assert_allclose(offline.stamps, poses.stamps, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(offline.xyz, poses.xyz, rtol=0, atol=1e-9)
     # Coverage is the core's business (the poses equal run_streaming's, above); what
     # crossed the three processes must still be a drone track close to ground truth.
     assert len(poses) >= 20 and result.coverage > 0.25, (result.as_dict(), report)
