@@ -191,15 +191,19 @@ class DetectorNode(Node):
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         self._specs = {s.name: s for s in all_param_specs()}
-        values = declare_parameters_from_specs(self, self._specs.values())
+        try:
+            values = declare_parameters_from_specs(self, self._specs.values())
+            self._extrinsics = {
+                AVIA: Extrinsic.from_list(values["avia_extrinsic"], "avia_extrinsic"),
+                MID360: Extrinsic.from_list(values["mid360_extrinsic"], "mid360_extrinsic"),
+            }
+            self._detector = StreamingDetector(
+                detector_params({k: v for k, v in values.items() if k in _DETECTOR_NAMES})
+            )
+        except BaseException:
+            Node.destroy_node(self)  # nothing of ours to stop yet
+            raise
         self._values = dict(values)
-        self._extrinsics = {
-            AVIA: Extrinsic.from_list(values["avia_extrinsic"], "avia_extrinsic"),
-            MID360: Extrinsic.from_list(values["mid360_extrinsic"], "mid360_extrinsic"),
-        }
-        self._detector = StreamingDetector(
-            detector_params({k: v for k, v in values.items() if k in _DETECTOR_NAMES})
-        )
         self._detector_lock = threading.Lock()
         self._generation = 0
         self._path: collections.deque[PoseStamped] = collections.deque(maxlen=values["path_length"])
@@ -220,7 +224,6 @@ class DetectorNode(Node):
         self._estimates = 0
         self._errors = 0
         self._last_error = ""
-        self._last_latency_s: float | None = None
 
         self._pose_pub = self.create_publisher(PoseStamped, POSE_TOPIC, OUTPUT_QOS)
         self._points_pub = self.create_publisher(PointCloud2, POINTS_TOPIC, OUTPUT_QOS)
@@ -303,7 +306,10 @@ class DetectorNode(Node):
                 "(looped bag or restarted driver?): resetting the detector"
                 if previous is not None
                 else f"{sensor} stamp {frame.stamp:.3f} s is before frames already "
-                "processed: resetting the detector"
+                "processed: resetting the detector",
+                # Garbage stamps can reset on every message: at most one line a second
+                # (the total is in /diagnostics as 'resets').
+                throttle_duration_sec=1.0,
             )
         elif result is AddResult.LATE:
             self.get_logger().warning(
@@ -386,7 +392,6 @@ class DetectorNode(Node):
             self._processed += 1
             self._period.processing_s.append(processing_s)
             self._period.latency_s.append(latency_s)
-            self._last_latency_s = latency_s
 
     def _publish_estimate(self, estimate: Any, points: np.ndarray | None) -> None:
         frame_id = self._values["frame_id"]
