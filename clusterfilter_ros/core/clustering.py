@@ -23,17 +23,22 @@ from scipy.sparse.csgraph import connected_components
 from clusterfilter_ros.core import voxel
 
 
-def voxel_clusters(sorted_keys: np.ndarray, weights: np.ndarray, min_samples: float) -> np.ndarray:
+def voxel_clusters(
+    sorted_keys: np.ndarray,
+    weights: np.ndarray,
+    min_samples: float,
+    offset_keys: np.ndarray | None = None,
+) -> np.ndarray:
     """Cluster label per occupied voxel (sorted unique ``sorted_keys``), -1 for noise.
 
-    ``weights`` are the points per voxel. Labels are 0..K-1, numbered in key order of
-    each cluster's first core voxel.
+    ``weights`` are the points per voxel; ``offset_keys`` the forward half-neighbourhood
+    (default 3D 26-neighbourhood). Labels are 0..K-1.
     """
     n = sorted_keys.shape[0]
     labels = np.full(n, -1, dtype=np.int64)
     if n == 0:
         return labels
-    first, second = voxel.neighbour_pairs(sorted_keys)
+    first, second = voxel.neighbour_pairs(sorted_keys, offset_keys)
     density = voxel.neighbourhood_sums(sorted_keys, weights, (first, second))
     core = density >= float(min_samples)
     if not core.any():
@@ -69,6 +74,22 @@ def voxel_cluster_points(
     w = np.ones(xyz.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
     per_voxel = np.bincount(inverse.reshape(-1), weights=w, minlength=ukeys.size)
     return voxel_clusters(ukeys, per_voxel, min_samples)[inverse.reshape(-1)]
+
+
+def spacetime_cluster_points(
+    xyz: np.ndarray, t: np.ndarray, cluster_voxel: float, time_bin: float, min_samples: int
+) -> np.ndarray:
+    """(N,) cluster label per point (-1 noise) by connected components of (x, y, z, t)
+    voxels (80-neighbourhood): points link only if close in space AND in time, so a
+    sparse drone track does not merge with sparse static remnants it passes at another
+    time, and remnants hit once every few seconds do not chain up at all."""
+    xyz = np.asarray(xyz).reshape(-1, 3)
+    if xyz.shape[0] == 0:
+        return np.empty(0, dtype=np.int64)
+    keys = voxel.spacetime_keys(xyz, t, cluster_voxel, time_bin)
+    ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    offsets = np.array([voxel.spacetime_offset_key(o) for o in voxel.HALF_OFFSETS_4D])
+    return voxel_clusters(ukeys, counts, min_samples, offsets)[inverse.reshape(-1)]
 
 
 def dbscan_points(xyz: np.ndarray, eps: float, min_samples: int) -> np.ndarray:

@@ -2,7 +2,8 @@
 
 1. Filter every frame (:func:`~clusterfilter_ros.core.preprocess.frame_points`) and
    superimpose all of them into the global cloud.
-2. Denoise the points of ``denoise_sensors`` by density over the whole sequence.
+2. Denoise the points of ``denoise_sensors`` by density over the whole sequence, and
+   (``static_suppression``) drop points in persistently occupied voxels.
 3. Cluster the global cloud (voxel connected components, or DBSCAN).
 4. Score every cluster from its local windows; gate; select the drone cluster(s).
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
@@ -16,17 +17,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from clusterfilter_ros.core.background import static_mask_offline
 from clusterfilter_ros.core.clustering import (
     dbscan_points,
     density_mask,
     relabel_compact,
+    spacetime_cluster_points,
     voxel_cluster_points,
 )
 from clusterfilter_ros.core.frame import Frame, TimedPositions
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
-from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory
+from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory, merge_trajectories
 
 
 @dataclass
@@ -76,10 +79,14 @@ def global_cloud(
     )
 
 
-def cluster_labels(xyz: np.ndarray, params: ParamSet) -> np.ndarray:
+def cluster_labels(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
     """Global cluster label per point (-1 noise) with the configured clusterer."""
     if params.clustering == "dbscan":
         return dbscan_points(xyz, params.eps, params.min_samples)
+    if params.cluster_time > 0:
+        return spacetime_cluster_points(
+            xyz, t, params.cluster_voxel, params.cluster_time, params.min_samples
+        )
     return voxel_cluster_points(xyz, params.cluster_voxel, params.min_samples)
 
 
@@ -95,7 +102,10 @@ def detect_offline(
     if noisy.any():
         keep[noisy] = density_mask(xyz[noisy], params.denoise_voxel, params.denoise_min_points)
     xyz, t = xyz[keep], t[keep]
-    labels, k = relabel_compact(cluster_labels(xyz, params))
+    if params.static_suppression and t.size:
+        moving = ~static_mask_offline(xyz, t, params)
+        xyz, t = xyz[moving], t[moving]
+    labels, k = relabel_compact(cluster_labels(xyz, t, params))
     scores = score_clusters(labels, xyz, t, params, n_clusters=k)
     selected = select_clusters(scores, params)
     rows = scores.rows()
@@ -107,14 +117,20 @@ def detect_offline(
     if not selected:
         return OfflineResult(empty, np.empty((0, 4)), None, rows, scores, selected)
     drone = np.isin(labels, selected)
-    conf_pts = scores.confidence[labels[drone]]
-    traj = fit_trajectory(
-        t[drone],
-        xyz[drone],
-        max_gap=params.max_gap,
-        max_extrapolation=params.max_extrapolation,
-        bin_seconds=params.frame_period / 2,
-        confidence=conf_pts,
+    # One trajectory per selected cluster: a segment never bridges two objects.
+    traj = merge_trajectories(
+        [
+            fit_trajectory(
+                t[labels == c],
+                xyz[labels == c],
+                max_gap=params.max_gap,
+                max_extrapolation=params.max_extrapolation,
+                bin_seconds=params.frame_period / 2,
+                confidence=np.full(int(np.count_nonzero(labels == c)), scores.confidence[c]),
+            )
+            for c in selected
+        ],
+        params.max_extrapolation,
     )
     drone_points = np.column_stack([t[drone], xyz[drone].astype(np.float64)])
     drone_points = drone_points[np.argsort(drone_points[:, 0], kind="stable")]

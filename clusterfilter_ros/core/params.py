@@ -198,6 +198,7 @@ __all__ = [
     "markdown_table",
     "DETECTOR_PARAMS",
     "detector_params",
+    "PAPER_PRESET",
     "detector_param_specs",
 ]
 
@@ -215,7 +216,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "mid360_min_z",
         "float",
-        3.5,
+        1.0,
         "Mid360 points at or below this height (m, output frame) are dropped as ground clutter.",
         minimum=-50.0,
         maximum=100.0,
@@ -259,6 +260,55 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         minimum=0.1,
         maximum=60.0,
     ),
+    # --- static-structure suppression (persistence form of the relative density) ---
+    ParamSpec(
+        "static_suppression",
+        "bool",
+        True,
+        "Remove points in voxels occupied during >= static_min_bins time bins before "
+        "clustering (walls, roofs, trees); false = the paper's pipeline.",
+    ),
+    ParamSpec(
+        "static_voxel",
+        "float",
+        1.5,
+        "Voxel edge (m) of the static-structure persistence map.",
+        minimum=0.05,
+        maximum=10.0,
+    ),
+    ParamSpec(
+        "static_bin",
+        "float",
+        1.0,
+        "Seconds per time bin of the persistence map.",
+        minimum=0.05,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "static_min_bins",
+        "int",
+        3,
+        "A voxel hit in at least this many distinct time bins is static.",
+        minimum=1,
+        maximum=64,
+    ),
+    ParamSpec(
+        "static_dilation",
+        "int",
+        0,
+        "Also drop points in voxels this many voxels away from a static one (0 or 1).",
+        minimum=0,
+        maximum=1,
+    ),
+    ParamSpec(
+        "warmup",
+        "float",
+        5.0,
+        "Streaming: no estimates during the first seconds of a stream (the persistence "
+        "map is still empty).",
+        minimum=0.0,
+        maximum=600.0,
+    ),
     # --- global clustering (paper 3.2) ---
     ParamSpec(
         "clustering",
@@ -279,7 +329,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_samples",
         "int",
-        10,
+        3,
         "Points in the neighbourhood that make a point (dbscan) or voxel (voxel) a core "
         "(paper code: 10).",
         minimum=1,
@@ -288,10 +338,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "cluster_voxel",
         "float",
-        1.0,
+        2.0,
         "Voxel edge (m) of the voxel clusterer; its 3x3x3 neighbourhood plays DBSCAN's eps ball.",
         minimum=0.05,
         maximum=20.0,
+    ),
+    ParamSpec(
+        "cluster_time",
+        "float",
+        0.5,
+        "Voxel clusterer: seconds per time bin of space-time (x, y, z, t) voxels; points "
+        "link only within +-1 bin. 0 = cluster space only (the paper's global cloud).",
+        minimum=0.0,
+        maximum=3600.0,
     ),
     ParamSpec(
         "voxel_size",
@@ -305,7 +364,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_cluster_points",
         "int",
-        100,
+        15,
         "A global cluster with fewer points is not a candidate (paper code: 100).",
         minimum=1,
         maximum=10000000,
@@ -321,7 +380,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_centroid_z",
         "float",
-        6.0,
+        1.5,
         "A global cluster whose centroid is lower (m) is not a candidate (paper code: 6.0).",
         minimum=-100.0,
         maximum=1000.0,
@@ -329,7 +388,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_volume",
         "float",
-        0.3,
+        0.0,
         "A global cluster occupying less volume (m^3 of voxel_size voxels) is not a "
         "candidate (paper code: 0.3).",
         minimum=0.0,
@@ -396,9 +455,44 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1.0,
     ),
     ParamSpec(
+        "coherence_window",
+        "float",
+        1.0,
+        "Normalized scoring: seconds per window of the motion-coherence measure.",
+        minimum=0.05,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "coherence_floor",
+        "float",
+        0.45,
+        "Normalized scoring: clusters with motion coherence at or below this get zero "
+        "confidence (static remnants and erratic birds measured 0.1-0.47 in simulation).",
+        minimum=0.0,
+        maximum=1.0,
+    ),
+    ParamSpec(
+        "min_coherence",
+        "float",
+        0.7,
+        "Normalized scoring: motion coherence (1 - window scatter / overall scatter) at "
+        "which a cluster gets full confidence; less scales it down (static remnants ~0).",
+        minimum=0.01,
+        maximum=1.0,
+    ),
+    ParamSpec(
+        "min_speed",
+        "float",
+        1.0,
+        "Normalized scoring: apparent speed (m/s; cluster size over its time span) at "
+        "which a cluster gets full confidence; slower scales it down.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "min_support_frames",
         "int",
-        5,
+        8,
         "Normalized scoring: full confidence needs drone points in at least this many "
         "distinct frames; fewer scale the confidence down.",
         minimum=1,
@@ -425,7 +519,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "max_extrapolation",
         "float",
-        0.3,
+        0.5,
         "No estimate more than this many seconds beyond the first/last drone point.",
         minimum=0.0,
         maximum=10.0,
@@ -459,7 +553,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "global_window",
         "float",
-        10.0,
+        20.0,
         "Streaming: seconds of history in the global accumulator (voxel counts decay with "
         "this time constant and voxels unseen for this long are dropped).",
         minimum=0.5,
@@ -476,7 +570,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "local_history",
         "float",
-        3.0,
+        10.0,
         "Streaming: seconds of raw points kept for the local windows and drone points.",
         minimum=0.2,
         maximum=60.0,
@@ -507,6 +601,23 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         length=3,
     ),
 )
+
+
+#: The paper's published settings (ablation baseline): space-only clustering of the
+#: whole cloud with its gates and ranking, no persistence suppression, no rejection.
+PAPER_PRESET: dict[str, Any] = {
+    "scoring": "paper",
+    "static_suppression": False,
+    "cluster_time": 0.0,
+    "mid360_min_z": 3.5,
+    "min_samples": 10,
+    "cluster_voxel": 1.0,
+    "min_cluster_points": 100,
+    "max_cluster_points": 10000,
+    "min_centroid_z": 6.0,
+    "min_volume": 0.3,
+    "min_confidence": 0.0,
+}
 
 
 def detector_params(values: Mapping[str, Any] | None = None) -> ParamSet:

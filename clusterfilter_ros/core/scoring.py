@@ -8,9 +8,12 @@ For every global cluster k:
   (never re-clustered), their local density rho_l and the relative density
   R = rho_l / rho_g; the voxel IoU between the voxel sets of consecutive windows;
 - the paper's score ``sum exp(R) + iou_weight * sum log(1 / max(IoU, iou_floor))``;
-- the normalized score: ``(mean min(R, 1) + iou_weight * mean log(1/IoU) / log(1/iou_floor))
-  / (1 + iou_weight)``, times ``min(1, support_frames / min_support_frames)``; in [0, 1]
-  and used as the cluster's confidence in both scoring modes.
+- the normalized score, used as the cluster's confidence in both scoring modes (in
+  [0, 1]): ``(mean min(R, 1) + iou_weight * mean log(1/IoU) / log(1/iou_floor)) /
+  (1 + iou_weight)``, times a ramp of the motion coherence (0 at ``coherence_floor``, 1
+  at ``min_coherence``; see :func:`motion_coherence`), times ``min(1, apparent_speed /
+  min_speed)`` (bounding-box size over time span: sparse static remnants crawl, a
+  flying drone does not), times ``min(1, support_frames / min_support_frames)``.
 """
 
 from __future__ import annotations
@@ -40,6 +43,8 @@ class ClusterScores:
     mean_relative_density: np.ndarray
     mean_iou: np.ndarray
     local_extent: np.ndarray
+    coherence: np.ndarray
+    apparent_speed: np.ndarray
     paper_score: np.ndarray
     normalized_score: np.ndarray
     confidence: np.ndarray
@@ -83,6 +88,8 @@ def _empty(k: int) -> ClusterScores:
         mean_relative_density=z.copy(),
         mean_iou=z.copy(),
         local_extent=z.copy(),
+        coherence=z.copy(),
+        apparent_speed=z.copy(),
         paper_score=z.copy(),
         normalized_score=z.copy(),
         confidence=z.copy(),
@@ -257,7 +264,15 @@ def score_clusters(
             sums["sum_log_inv_iou"] / npairs / np.log(1.0 / float(params.iou_floor)),
             0.0,
         )
-        res.normalized_score = (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
+        res.coherence = motion_coherence(lab, pts, tt, k, float(params.coherence_window))
+        lo = min(float(params.coherence_floor), float(params.min_coherence) - 1e-6)
+        coherent = np.clip((res.coherence - lo) / (float(params.min_coherence) - lo), 0.0, 1.0)
+        span = np.maximum(res.t_last - res.t_first, fp)
+        res.apparent_speed = np.where(counts > 0, res.extent / span, 0.0)
+        moving = np.clip(res.apparent_speed / float(params.min_speed), 0.0, 1.0)
+        res.normalized_score = (
+            coherent * moving * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
+        )
         support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
     res.candidate = (
@@ -271,6 +286,43 @@ def score_clusters(
     if params.scoring != "paper":
         res.candidate &= res.local_extent <= params.max_local_extent
     return res
+
+
+def motion_coherence(
+    lab: np.ndarray, pts: np.ndarray, t: np.ndarray, k: int, window: float
+) -> np.ndarray:
+    """1 - (mean distance to the window centroid) / (mean distance to the cluster centroid).
+
+    Windows are ``window`` seconds long. A moving object's points are close to the
+    centroid of their own time window and far from the overall centroid (coherence near
+    1); a static object's windows all sample the same place (near 0). Clusters seen in
+    a single window get 0: no evidence of motion.
+    """
+    out = np.zeros(k)
+    if lab.size == 0:
+        return out
+    counts = np.bincount(lab, minlength=k).astype(np.float64)
+    centroid = (
+        np.stack([np.bincount(lab, weights=pts[:, a], minlength=k) for a in range(3)], axis=1)
+        / np.maximum(counts, 1.0)[:, None]
+    )
+    win = np.floor((t - t.min()) / window).astype(np.int64)
+    n_win = int(win.max()) + 1
+    cw_u, cw_inv = np.unique(lab * n_win + win, return_inverse=True)
+    cw_inv = cw_inv.reshape(-1)
+    cw_n = np.bincount(cw_inv).astype(np.float64)
+    cw_c = np.stack([np.bincount(cw_inv, weights=pts[:, a]) for a in range(3)], axis=1)
+    cw_c /= cw_n[:, None]
+    # Only windows with >= 2 points say anything about scatter within a window.
+    multi = cw_n[cw_inv] >= 2
+    local = np.linalg.norm(pts - cw_c[cw_inv], axis=1)
+    overall = np.linalg.norm(pts - centroid[lab], axis=1)
+    local_sum = np.bincount(lab[multi], weights=local[multi], minlength=k)
+    overall_sum = np.bincount(lab[multi], weights=overall[multi], minlength=k)
+    multi_windows = np.bincount((cw_u // n_win)[cw_n >= 2], minlength=k)
+    coh = 1.0 - local_sum / np.maximum(overall_sum, 1e-9)
+    out[:] = np.where(multi_windows >= 2, np.clip(coh, 0.0, 1.0), 0.0)
+    return out
 
 
 def select_clusters(scores: ClusterScores, params: ParamSet) -> list[int]:

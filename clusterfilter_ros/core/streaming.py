@@ -2,23 +2,20 @@
 
 State (all bounded whatever the stream length):
 
-- **Global accumulator**: a voxel grid (``voxel_size`` voxels) held as sorted int64 keys
-  with a hit count and last-seen time per voxel. Counts decay with time constant
-  ``global_window`` and voxels unseen for ``global_window`` seconds are dropped; the grid
-  is capped at ``max_accumulator_voxels`` (weakest voxels dropped first). Static
-  structure piles up counts (high global density); a moving drone leaves ~1 hit/voxel.
-- **Local history**: the raw filtered points of the last ``local_history`` seconds
-  (capped at ``max_local_points``), from which the local windows and the drone points
-  come.
+- **Persistence map** (:class:`~clusterfilter_ros.core.background.BackgroundGrid`): per
+  ``static_voxel`` voxel, which of the last ``global_window`` seconds (in ``static_bin``
+  bins) it was hit in; capped at ``max_accumulator_voxels``. Voxels hit in at least
+  ``static_min_bins`` bins are static structure.
+- **Local history**: the filtered points of the last ``local_history`` seconds (capped
+  at ``max_local_points``), from which clusters, local windows and drone points come.
 - **Track**: per-frame mean positions of the selected cluster's points.
 
-Every ``recluster_period`` seconds of stream time the pending frames are merged into the
-grid, the grid is clustered (voxel connected components on ``cluster_voxel`` voxels,
-weighted by the counts), each cluster is scored from its local-history points (same
-scoring code as offline, global density from the grid) and the best candidate becomes
-the track. Between re-clusterings, new points within ``track_gate`` metres of the
-predicted position extend the track. The estimate for a frame is a weighted straight-line
-fit over the track's last ``track_window`` seconds, evaluated at the frame stamp.
+Every ``recluster_period`` seconds of stream time the pending frames go into the
+persistence map, the non-static history points are clustered (voxel connected
+components), each cluster is scored by the same code as offline and the best candidate
+becomes the track. Between re-clusterings, new points within ``track_gate`` metres of
+the predicted position extend the track. The estimate for a frame is a weighted
+straight-line fit over the track's last ``track_window`` seconds at the frame stamp.
 """
 
 from __future__ import annotations
@@ -33,16 +30,19 @@ from typing import Any
 import numpy as np
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
+from clusterfilter_ros.core.background import BackgroundGrid
+from clusterfilter_ros.core.clustering import relabel_compact
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import Frame
+from clusterfilter_ros.core.offline import cluster_labels
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 
 #: Parameters whose change invalidates the accumulated state (voxel keys, filtering).
 _STRUCTURAL = {
-    "voxel_size",
+    "static_voxel",
+    "static_bin",
     "denoise_voxel",
     "denoise_sensors",
     "mid360_min_z",
@@ -58,7 +58,7 @@ class _Chunk:
     stamp: float
     xyz: np.ndarray  # (N, 3) float32
     t: np.ndarray  # (N,) float64
-    keys: np.ndarray  # (N,) int64 voxel_size keys
+    static_keys: np.ndarray  # (N,) int64 static_voxel keys
 
 
 @dataclass
@@ -80,17 +80,13 @@ class StreamingDetector:
     # ------------------------------------------------------------------ public API
     def reset(self) -> None:
         """Forget everything seen so far (counters of pushed/rejected frames are kept)."""
-        self._grid_keys = np.empty(0, np.int64)
-        self._grid_counts = np.empty(0, np.float64)
-        self._grid_last = np.empty(0, np.float64)
-        self._grid_time = math.nan
-        self._pending: list[tuple[np.ndarray, float]] = []
+        self._background = BackgroundGrid(self.params)
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []
         self._chunks: deque[_Chunk] = deque()
         self._chunk_points = 0
         self._denoise_recent: dict[str, deque[tuple[float, np.ndarray]]] = {}
         self._track: deque[_TrackSample] = deque()
         self._selected_conf = 0.0
-        self._selected_clusters = 0
         self._now = -math.inf
         self._origin = math.nan
         self._last_recluster = -math.inf
@@ -99,6 +95,7 @@ class StreamingDetector:
         self._reclusters = 0
         self._last_push_ms = 0.0
         self._clusters = 0
+        self._foreground_points = 0
 
     def update_params(self, values: Mapping[str, Any]) -> None:
         """Validate and apply new values; the state is reset only if a voxel or filter
@@ -107,6 +104,7 @@ class StreamingDetector:
         old = self.params.as_dict()
         changed = {k for k, v in new.as_dict().items() if old[k] != v}
         self.params = new
+        self._background.params = new
         if changed & _STRUCTURAL:
             self.reset()
 
@@ -122,14 +120,14 @@ class StreamingDetector:
         if math.isnan(self._origin):
             self._origin = stamp
         xyz, t = frame_points(frame, self.params)
+        self._now = max(self._now, stamp)
         if frame.sensor in self.params.denoise_sensors:
             keep = self._denoise(frame.sensor, stamp, xyz)
             xyz, t = xyz[keep], t[keep]
-        keys = voxel.voxel_keys(xyz, self.params.voxel_size)
-        self._now = max(self._now, stamp)
-        self._chunks.append(_Chunk(stamp, xyz, t, keys))
+        static_keys = voxel.voxel_keys(xyz, self.params.static_voxel)
+        self._chunks.append(_Chunk(stamp, xyz, t, static_keys))
         self._chunk_points += xyz.shape[0]
-        self._pending.append((keys, stamp))
+        self._pending.append((static_keys, t))
         self._evict_chunks()
         if self._now - self._last_recluster >= self.params.recluster_period:
             self._recluster()
@@ -149,13 +147,14 @@ class StreamingDetector:
 
     def stats(self) -> dict[str, float]:
         """Sizes and timings of the state, for monitoring and benchmarks."""
-        grid_bytes = self._grid_keys.nbytes + self._grid_counts.nbytes + self._grid_last.nbytes
-        local_bytes = sum(c.xyz.nbytes + c.t.nbytes + c.keys.nbytes for c in self._chunks)
-        pending_bytes = sum(k.nbytes for k, _ in self._pending)
+        grid_bytes = self._background.nbytes
+        local_bytes = sum(c.xyz.nbytes + c.t.nbytes + c.static_keys.nbytes for c in self._chunks)
+        pending_bytes = sum(k.nbytes + t.nbytes for k, t in self._pending)
         return {
-            "accumulator_voxels": float(self._grid_keys.size),
+            "accumulator_voxels": float(self._background.keys.size),
             "accumulator_bytes": float(grid_bytes),
             "local_points": float(self._chunk_points),
+            "foreground_points": float(self._foreground_points),
             "local_bytes": float(local_bytes + pending_bytes),
             "state_bytes": float(grid_bytes + local_bytes + pending_bytes),
             "track_samples": float(len(self._track)),
@@ -175,9 +174,9 @@ class StreamingDetector:
         p = self.params
         recent = self._denoise_recent.setdefault(sensor, deque())
         keys = voxel.voxel_keys(xyz, p.denoise_voxel)
-        recent.append((stamp, keys))
         while recent and recent[0][0] < self._now - p.denoise_window:
             recent.popleft()
+        recent.append((stamp, keys))
         if xyz.shape[0] == 0:
             return np.zeros(0, bool)
         all_keys = np.concatenate([k for _, k in recent])
@@ -190,85 +189,43 @@ class StreamingDetector:
         cap = self.params.max_local_points
         while self._chunks and (self._chunks[0].stamp < lo or self._chunk_points > cap):
             self._chunk_points -= self._chunks.popleft().xyz.shape[0]
-        lo_track = self._now - self.params.local_history
-        while self._track and self._track[0].t < lo_track:
+        while self._track and self._track[0].t < lo:
             self._track.popleft()
-
-    def _merge_pending(self) -> None:
-        p = self.params
-        now = self._now
-        if not math.isnan(self._grid_time) and self._grid_counts.size:
-            self._grid_counts *= math.exp(-max(now - self._grid_time, 0.0) / p.global_window)
-        self._grid_time = now
-        if self._pending:
-            new_keys = np.concatenate([k for k, _ in self._pending])
-            self._pending.clear()
-            uk, cnt = np.unique(new_keys, return_counts=True)
-            idx = voxel.lookup(self._grid_keys, uk)
-            found = idx >= 0
-            self._grid_counts[idx[found]] += cnt[found]
-            self._grid_last[idx[found]] = now
-            fresh = ~found
-            if fresh.any():
-                pos = np.searchsorted(self._grid_keys, uk[fresh])
-                self._grid_keys = np.insert(self._grid_keys, pos, uk[fresh])
-                self._grid_counts = np.insert(self._grid_counts, pos, cnt[fresh].astype(float))
-                self._grid_last = np.insert(self._grid_last, pos, now)
-        keep = self._grid_last >= now - p.global_window
-        if self._grid_keys.size - int(keep.sum()) > 0:
-            self._grid_keys = self._grid_keys[keep]
-            self._grid_counts = self._grid_counts[keep]
-            self._grid_last = self._grid_last[keep]
-        excess = self._grid_keys.size - p.max_accumulator_voxels
-        if excess > 0:
-            drop = np.argpartition(self._grid_counts, excess)[:excess]
-            keep = np.ones(self._grid_keys.size, bool)
-            keep[drop] = False
-            self._grid_keys = self._grid_keys[keep]
-            self._grid_counts = self._grid_counts[keep]
-            self._grid_last = self._grid_last[keep]
 
     def _recluster(self) -> None:
         start = time.perf_counter()
         p = self.params
         self._last_recluster = self._now
-        self._merge_pending()
+        if self._pending:
+            keys = np.concatenate([k for k, _ in self._pending])
+            times = np.concatenate([t for _, t in self._pending])
+            self._pending.clear()
+        else:
+            keys, times = np.empty(0, np.int64), np.empty(0)
+        self._background.update(keys, times, self._now)
         self._track.clear()
         self._selected_conf = 0.0
         self._clusters = 0
-        if self._grid_keys.size and self._chunks:
-            centres = (voxel.unpack(self._grid_keys) + 0.5) * p.voxel_size
-            coarse = voxel.voxel_keys(centres, p.cluster_voxel)
-            uc, inv = np.unique(coarse, return_inverse=True)
-            inv = inv.reshape(-1)
-            weights = np.bincount(inv, weights=self._grid_counts, minlength=uc.size)
-            grid_labels, k = relabel_compact(voxel_clusters(uc, weights, p.min_samples)[inv])
+        self._foreground_points = 0
+        if self._chunks and self._chunk_points:
+            xyz = np.concatenate([c.xyz for c in self._chunks])
+            t = np.concatenate([c.t for c in self._chunks])
+            if p.static_suppression:
+                skeys = np.concatenate([c.static_keys for c in self._chunks])
+                moving = voxel.lookup(self._background.static_keys(), skeys) < 0
+                xyz, t = xyz[moving], t[moving]
+            self._foreground_points = int(t.size)
+            labels, k = relabel_compact(cluster_labels(xyz, t, p))
             self._clusters = k
             if k:
-                g_pts = np.bincount(
-                    grid_labels[grid_labels >= 0],
-                    weights=self._grid_counts[grid_labels >= 0],
-                    minlength=k,
-                )
-                g_vox = np.bincount(grid_labels[grid_labels >= 0], minlength=k).astype(float)
-                xyz = np.concatenate([c.xyz for c in self._chunks])
-                t = np.concatenate([c.t for c in self._chunks])
-                keys = np.concatenate([c.keys for c in self._chunks])
-                gi = voxel.lookup(self._grid_keys, keys)
-                labels = np.where(gi >= 0, grid_labels[gi], -1)
-                scores = score_clusters(
-                    labels,
-                    xyz,
-                    t,
-                    p,
-                    n_clusters=k,
-                    global_points=g_pts,
-                    global_voxels=g_vox,
-                    t0=self._origin,
-                )
+                # Windows aligned to the stream's first stamp (deterministic), unless the
+                # stream's clock jumped so far that the offsets would not fit an int64.
+                t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
+                scores = score_clusters(labels, xyz, t, p, n_clusters=k, t0=t0)
                 chosen = select_clusters(scores, p)
                 if chosen:
-                    best = chosen[0]
+                    # The selected cluster that was seen last is the one being tracked.
+                    best = max(chosen[:3], key=lambda c: scores.t_last[c])
                     self._selected_conf = float(scores.confidence[best])
                     self._rebuild_track(labels == best, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
@@ -281,7 +238,7 @@ class StreamingDetector:
         if tt.size == 0:
             return
         half = self.params.frame_period / 2
-        bins = np.floor((tt - self._origin) / half + 1e-6).astype(np.int64)
+        bins = np.floor((tt - tt.min()) / half + 1e-6).astype(np.int64)
         order = np.argsort(bins, kind="stable")
         bins, pts, tt = bins[order], pts[order], tt[order]
         cuts = np.nonzero(np.diff(bins))[0] + 1
@@ -327,6 +284,8 @@ class StreamingDetector:
     def _estimate(self, stamp: float) -> Estimate | None:
         p = self.params
         if not self._track or self._selected_conf < p.min_confidence:
+            return None
+        if stamp - self._origin < p.warmup:
             return None
         fit = self._fit(stamp)
         if fit is None:

@@ -165,3 +165,16 @@ def fit_trajectory(
             mean = np.average(sp, axis=0, weights=sw)
             segments.append(_Segment(st[0], st[-1], "constant", mean, conf, st.size))
     return Trajectory(segments, max_extrapolation, ts, ws)
+
+
+def merge_trajectories(parts: list[Trajectory], max_extrapolation: float) -> Trajectory | None:
+    """One :class:`Trajectory` holding the segments of several (e.g. one per cluster),
+    so that no segment ever spans two different objects."""
+    parts = [p for p in parts if p is not None and p.segments]
+    if not parts:
+        return None
+    segments = sorted((s for p in parts for s in p.segments), key=lambda s: s.t_start)
+    times = np.concatenate([p.sample_times for p in parts])
+    counts = np.concatenate([p.sample_counts for p in parts])
+    order = np.argsort(times, kind="stable")
+    return Trajectory(segments, max_extrapolation, times[order], counts[order])

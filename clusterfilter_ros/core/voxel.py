@@ -30,9 +30,8 @@ HALF_OFFSETS = np.array(
 
 def voxel_indices(xyz: np.ndarray, size: float) -> np.ndarray:
     """(N, 3) int64 voxel indices of points for voxels of edge ``size`` metres."""
-    idx = np.floor(np.asarray(xyz, dtype=np.float64) / float(size)).astype(np.int64)
-    np.clip(idx, -_LIMIT, _LIMIT, out=idx)
-    return idx
+    scaled = np.floor(np.asarray(xyz, dtype=np.float64) / float(size))
+    return np.clip(scaled, -_LIMIT, _LIMIT).astype(np.int64)
 
 
 def pack(idx: np.ndarray) -> np.ndarray:
@@ -62,15 +61,69 @@ def offset_key(offset: np.ndarray) -> int:
     return (dx << (2 * _BITS)) + (dy << _BITS) + dz
 
 
-def neighbour_pairs(sorted_keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All 26-adjacent pairs (i, j) of a sorted unique key array, each pair once."""
+# --- space-time keys: 15 bits per spatial axis, 18 bits of time bins -------------------
+_S_BITS = 15
+_S_OFFSET = 1 << (_S_BITS - 1)
+_T_BITS = 18
+_T_OFFSET = 1 << (_T_BITS - 1)
+
+#: The 40 "forward" offsets of the 80-neighbourhood in (x, y, z, t) voxels.
+HALF_OFFSETS_4D = np.array(
+    [
+        (dx, dy, dz, dt)
+        for dx in (-1, 0, 1)
+        for dy in (-1, 0, 1)
+        for dz in (-1, 0, 1)
+        for dt in (-1, 0, 1)
+        if (dx, dy, dz, dt) > (0, 0, 0, 0)
+    ],
+    dtype=np.int64,
+)
+
+
+def spacetime_keys(xyz: np.ndarray, t: np.ndarray, size: float, time_bin: float) -> np.ndarray:
+    """(N,) int64 keys of (x, y, z, t) voxels: edge ``size`` m, ``time_bin`` s.
+
+    Time is taken relative to the earliest stamp, so any recording up to 2**17 bins
+    long (36 h at 0.5 s) fits; spatial indices are clipped to +-2**14 voxels.
+    """
+    idx = np.clip(
+        np.floor(np.asarray(xyz, dtype=np.float64) / float(size)), -_S_OFFSET + 2, _S_OFFSET - 2
+    ).astype(np.int64)
+    t = np.asarray(t, dtype=np.float64)
+    rel = np.floor((t - (t.min() if t.size else 0.0)) / float(time_bin))
+    it = np.clip(rel, 0, (1 << _T_BITS) - 2).astype(np.int64)
+    idx = idx + _S_OFFSET
+    return (
+        (idx[:, 0] << (2 * _S_BITS + _T_BITS))
+        | (idx[:, 1] << (_S_BITS + _T_BITS))
+        | (idx[:, 2] << _T_BITS)
+        | (it + 1)
+    )
+
+
+def spacetime_offset_key(offset: np.ndarray) -> int:
+    dx, dy, dz, dt = (int(v) for v in offset)
+    return (dx << (2 * _S_BITS + _T_BITS)) + (dy << (_S_BITS + _T_BITS)) + (dz << _T_BITS) + dt
+
+
+def neighbour_pairs(
+    sorted_keys: np.ndarray, offset_keys: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """All adjacent pairs (i, j) of a sorted unique key array, each pair once.
+
+    ``offset_keys``: key differences of the forward half-neighbourhood (default: the
+    13 of the 3D 26-neighbourhood).
+    """
     n = sorted_keys.shape[0]
     firsts, seconds = [], []
     if n == 0:
         empty = np.empty(0, dtype=np.int64)
         return empty, empty
-    for off in HALF_OFFSETS:
-        target = sorted_keys + offset_key(off)
+    if offset_keys is None:
+        offset_keys = [offset_key(off) for off in HALF_OFFSETS]
+    for off in offset_keys:
+        target = sorted_keys + int(off)
         pos = np.searchsorted(sorted_keys, target)
         pos_c = np.minimum(pos, n - 1)
         hit = sorted_keys[pos_c] == target
@@ -88,7 +141,7 @@ def neighbourhood_sums(
     weights: np.ndarray,
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
-    """Sum of ``weights`` over each voxel's 3x3x3 neighbourhood (itself included)."""
+    """Sum of ``weights`` over each voxel's neighbourhood (itself included; default 3x3x3)."""
     first, second = neighbour_pairs(sorted_keys) if pairs is None else pairs
     w = np.asarray(weights, dtype=np.float64)
     total = w.copy()

@@ -24,7 +24,7 @@ _spec.loader.exec_module(scenes)
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory):
     root = tmp_path_factory.mktemp("rec")
-    frames, tt, tx = scenes.build_scene(duration=6.0, wall_points=200)
+    frames, tt, tx = scenes.build_scene(duration=10.0, wall_points=200)
     gt = TimedPositions(tt[::3], tx[::3])
     seq = Sequence("flight", frames, gt)
     write_output(seq, root / "mmaud" / "flight", fmt="mmaud")
@@ -51,7 +51,7 @@ def test_detect_then_evaluate(recordings, tmp_path, mode, source, capsys):
     assert rc == 0
     metrics = json.loads(capsys.readouterr().out)
     assert metrics["rmse"] < 0.6
-    assert metrics["detection_rate"] > (0.9 if mode == "offline" else 0.6)
+    assert metrics["detection_rate"] > (0.9 if mode == "offline" else 0.45)  # 5 s warm-up
     assert png.stat().st_size > 10_000
 
 
@@ -70,18 +70,18 @@ def test_ug2_format_over_a_folder_of_sequences(recordings, tmp_path):
 
 def test_timestamps_and_params(recordings, tmp_path):
     stamps = tmp_path / "stamps.csv"
-    stamps.write_text("timestamp\n1001.0\n1002.5\n1050.0\n")
+    stamps.write_text("timestamp\n1001.0\n1006.5\n1050.0\n")
     out = tmp_path / "at.csv"
     args = ["detect", str(recordings / "mmaud" / "flight"), "-o", str(out), "--quiet"]
     assert main([*args, "--timestamps", str(stamps), "--param", "target_offset=[0,0,1]"]) == 0
     pred = read_positions_csv(out)
-    assert pred.stamps.tolist() == [1001.0, 1002.5]
+    assert pred.stamps.tolist() == [1001.0, 1006.5]
     truth = scenes.drone_path(pred.stamps - 1000.0)
     assert np.all(np.abs(pred.xyz[:, 2] - truth[:, 2] - 1.0) < 0.5)
     stream_out = tmp_path / "at_stream.csv"
     args = ["detect", str(recordings / "mmaud" / "flight"), "-o", str(stream_out), "--quiet"]
     assert main([*args, "--mode", "stream", "--timestamps", str(stamps)]) == 0
-    assert read_positions_csv(stream_out).stamps.tolist() == [1002.5]  # warm-up before
+    assert read_positions_csv(stream_out).stamps.tolist() == [1006.5]  # 1001 is in warm-up
 
 
 def test_drone_free_evaluation_and_user_errors(recordings, tmp_path, capsys):

@@ -1,0 +1,194 @@
+"""Accuracy of the detector on simulated scenarios, offline and streaming.
+
+For every (scenario, seed) this simulates the recording (cached as .npz-free pickles in
+--cache so re-runs are quick), runs ``detect_offline`` and ``run_streaming`` with the
+prism offset as ``target_offset``, and evaluates against the total-station ground truth:
+detection rate over the time the drone gives at least one lidar return within +-0.5 s
+("observable"), RMSE, coverage; on drone-free scenarios the false-alarm fraction.
+
+    .venv/bin/python benchmarks/detector_accuracy.py --seeds 100 101 102 --markdown
+
+Prints one row per (scenario, seed, mode) and a per-scenario summary (means over seeds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pickle
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from clusterfilter_ros.core.evaluation import evaluate, observable_mask
+from clusterfilter_ros.core.frame import TimedPositions
+from clusterfilter_ros.core.offline import detect_offline
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.streaming import run_streaming
+
+DEFAULT_SCENARIOS = [
+    "default",
+    "takeoff_landing",
+    "flyover",
+    "fast_pass",
+    "hover",
+    "birds",
+    "avia_only",
+    "no_drone",
+    "no_drone_birds",
+]
+
+
+def load_sim(scenario: str, seed: int, cache: Path | None, duration: float | None = None):
+    """The simulated recording (from the cache when present)."""
+    from clusterfilter_ros.sim.scenarios import simulate
+
+    key = f"{scenario}_s{seed}" + (f"_d{duration:g}" if duration else "")
+    path = cache / f"{key}.pkl" if cache else None
+    if path is not None and path.exists():
+        with path.open("rb") as fh:
+            return pickle.load(fh)
+    sim = simulate(scenario, seed, duration)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("wb") as fh:
+            pickle.dump(sim, fh, protocol=pickle.HIGHEST_PROTOCOL)
+    return sim
+
+
+def drone_hit_stamps(sim) -> np.ndarray:
+    """One stamp per drone lidar return in the recording."""
+    frames = sim.sequence.frames
+    return np.concatenate(
+        [np.full(int(np.count_nonzero(sim.labels[i])), f.stamp) for i, f in enumerate(frames)]
+        + [np.empty(0)]
+    )
+
+
+def estimates_to_positions(estimates) -> TimedPositions:
+    return TimedPositions(
+        np.array([e.stamp for e in estimates], dtype=np.float64),
+        np.array([e.position for e in estimates], dtype=np.float64).reshape(-1, 3),
+    )
+
+
+def dedupe(pred: TimedPositions) -> TimedPositions:
+    """Keep the last estimate of each stamp (two lidars can share a stamp)."""
+    if len(pred) == 0:
+        return pred
+    _, idx = np.unique(pred.stamps[::-1], return_index=True)
+    keep = np.sort(len(pred) - 1 - idx)
+    return TimedPositions(pred.stamps[keep], pred.xyz[keep])
+
+
+def run_case(sim, mode: str, values: dict) -> tuple[dict, TimedPositions, float]:
+    params = detector_params({**values, "target_offset": [float(v) for v in sim.prism_offset]})
+    frames = sim.sequence.frames
+    start = time.perf_counter()
+    if mode == "offline":
+        pred = detect_offline(frames, params).estimates
+    else:
+        pred = estimates_to_positions(run_streaming(frames, params))
+    seconds = time.perf_counter() - start
+    pred = dedupe(TimedPositions(pred.stamps, pred.xyz))
+    gt = sim.sequence.ground_truth
+    duration = frames[-1].stamp - frames[0].stamp
+    if gt is None or len(gt) == 0:
+        gt = TimedPositions(np.empty(0), np.empty((0, 3)))
+        obs = None
+    else:
+        obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
+    res = evaluate(pred, gt, observable=obs, duration=duration)
+    return res.as_dict(), pred, seconds
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", nargs="+", default=DEFAULT_SCENARIOS)
+    ap.add_argument("--seeds", nargs="+", type=int, default=[100, 101, 102])
+    ap.add_argument("--modes", nargs="+", default=["offline", "stream"])
+    ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
+    ap.add_argument("--json", type=Path, help="also write all rows as JSON here")
+    ap.add_argument("--markdown", action="store_true", help="print the summary as Markdown")
+    args = ap.parse_args(argv)
+    from clusterfilter_ros.core.params import parse_assignments
+
+    values = parse_assignments(args.param)
+    rows = []
+    for scenario in args.scenarios:
+        for seed in args.seeds:
+            sim = load_sim(scenario, seed, args.cache)
+            for mode in args.modes:
+                metrics, _, seconds = run_case(sim, mode, values)
+                row = {"scenario": scenario, "seed": seed, "mode": mode, "seconds": seconds}
+                row.update(metrics)
+                rows.append(row)
+                print(
+                    f"{scenario:>16} s{seed:<4} {mode:>7}:"
+                    f" det_obs={_f(row['observable_detection_rate'])}"
+                    f" det={_f(row['detection_rate'])} cov={_f(row['coverage'])}"
+                    f" rmse={_f(row['rmse'])} p95={_f(row['p95_error'])}"
+                    f" fa={_f(row['false_alarm_fraction'])} t={seconds:.2f}s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    print_summary(rows, args.markdown)
+    return 0
+
+
+def _f(v) -> str:
+    return "  n/a" if v is None else f"{v:.3f}"
+
+
+def _mean(rows, key):
+    vals = [r[key] for r in rows if r[key] is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def print_summary(rows, markdown: bool) -> None:
+    scenarios = list(dict.fromkeys(r["scenario"] for r in rows))
+    modes = list(dict.fromkeys(r["mode"] for r in rows))
+    header = (
+        "| scenario | mode | seeds | detection (observable) | detection (all GT) | coverage "
+        "| RMSE m | p95 m | false alarms (% time) | run time s |"
+    )
+    print(header if markdown else header.replace("|", " "))
+    if markdown:
+        print("|---|---|---|---|---|---|---|---|---|---|")
+    for sc in scenarios:
+        for mode in modes:
+            rs = [r for r in rows if r["scenario"] == sc and r["mode"] == mode]
+            if not rs:
+                continue
+            fa = _mean(rs, "false_alarm_fraction")
+            cells = [
+                sc,
+                mode,
+                ",".join(str(r["seed"]) for r in rs),
+                _pct(_mean(rs, "observable_detection_rate")),
+                _pct(_mean(rs, "detection_rate")),
+                _pct(_mean(rs, "coverage")),
+                _num(_mean(rs, "rmse")),
+                _num(_mean(rs, "p95_error")),
+                _pct(fa),
+                _num(_mean(rs, "seconds")),
+            ]
+            line = "| " + " | ".join(cells) + " |"
+            print(line if markdown else line.replace("|", " "))
+
+
+def _pct(v) -> str:
+    return "-" if v is None else f"{100 * v:.1f}"
+
+
+def _num(v) -> str:
+    return "-" if v is None else f"{v:.2f}"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,133 @@
+"""Static-structure suppression: the relative-density idea applied per voxel.
+
+The paper separates static structure from a moving drone by comparing a cluster's
+density accumulated over the whole sequence with its density in short windows. With a
+non-repetitive Livox scan at tens of metres, though, a static surface is sampled so
+sparsely that its points rarely share a 0.2 m voxel, and that cluster-level ratio stops
+telling a far wall from a drone. Persistence is the robust form of the same idea: a
+voxel of edge ``static_voxel`` that receives returns in at least ``static_min_bins``
+distinct time bins of ``static_bin`` seconds is static (walls, roofs, trees, poles); a
+moving drone occupies any one voxel for a bin or two. Points in static voxels (optionally
+dilated by ``static_dilation`` voxels) are removed before clustering.
+
+Offline, bins are counted over the whole sequence; streaming, over the last
+``global_window`` seconds with a 64-bit hit mask per voxel (:class:`BackgroundGrid`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.params import ParamSet
+
+_MAX_BINS = 64
+
+
+def _popcount(x: np.ndarray) -> np.ndarray:
+    if hasattr(np, "bitwise_count"):
+        return np.bitwise_count(x).astype(np.int64)
+    as_bytes = np.ascontiguousarray(x, dtype=np.uint64).view(np.uint8).reshape(-1, 8)
+    return np.unpackbits(as_bytes, axis=1).sum(axis=1).astype(np.int64)
+
+
+def _dilate(static_keys: np.ndarray, dilation: int) -> np.ndarray:
+    """Sorted keys of the static voxels plus their 26 neighbours (dilation 1)."""
+    if dilation <= 0 or static_keys.size == 0:
+        return static_keys
+    offs = [
+        voxel.offset_key((dx, dy, dz))
+        for dx in (-1, 0, 1)
+        for dy in (-1, 0, 1)
+        for dz in (-1, 0, 1)
+    ]
+    return np.unique((static_keys[:, None] + np.asarray(offs, dtype=np.int64)[None, :]).ravel())
+
+
+def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
+    """(N,) bool: points in voxels occupied in >= static_min_bins time bins of the sequence."""
+    xyz = np.asarray(xyz).reshape(-1, 3)
+    if xyz.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    keys = voxel.voxel_keys(xyz, params.static_voxel)
+    bins = np.floor((t - t.min()) / params.static_bin).astype(np.int64)
+    ukeys, kinv = np.unique(keys, return_inverse=True)
+    kinv = kinv.reshape(-1)
+    n_bins = int(bins.max()) + 1
+    pairs = np.unique(kinv * n_bins + bins)
+    bins_per_voxel = np.bincount(pairs // n_bins, minlength=ukeys.size)
+    static_keys = ukeys[bins_per_voxel >= params.static_min_bins]
+    static_keys = _dilate(static_keys, params.static_dilation)
+    return voxel.lookup(static_keys, keys) >= 0
+
+
+class BackgroundGrid:
+    """Streaming persistence map: per voxel, a bit per ``static_bin`` seconds it was hit.
+
+    Memory: three arrays over the voxels hit within the last ``global_window`` seconds
+    (at most :data:`_MAX_BINS` bins), capped at ``max_accumulator_voxels``.
+    """
+
+    def __init__(self, params: ParamSet) -> None:
+        self.params = params
+        self.keys = np.empty(0, np.int64)
+        self.masks = np.empty(0, np.uint64)
+        self.bin = None  # bin index that bit 0 stands for
+
+    def window_bins(self) -> int:
+        return max(1, min(_MAX_BINS, math.ceil(self.params.global_window / self.params.static_bin)))
+
+    def update(self, keys: np.ndarray, t: np.ndarray, now: float) -> None:
+        """Record hits (static_voxel keys with their times) and age the map to ``now``."""
+        p = self.params
+        now_bin = math.floor(now / p.static_bin)  # a float stays finite for any stamp
+        if self.bin is None:
+            self.bin = now_bin
+        shift = now_bin - self.bin
+        if shift > 0:
+            if shift >= _MAX_BINS:
+                self.masks[:] = 0
+            else:
+                self.masks <<= np.uint64(int(shift))
+            self.bin = now_bin
+        window = self.window_bins()
+        if keys.size:
+            age = float(now_bin) - np.floor(np.asarray(t, dtype=np.float64) / p.static_bin)
+            ok = (age >= 0) & (age < window)
+            keys = keys[ok]
+            bits = np.left_shift(np.uint64(1), age[ok].astype(np.uint64))
+            order = np.argsort(keys, kind="stable")
+            keys, bits = keys[order], bits[order]
+            uk, start = np.unique(keys, return_index=True)
+            hit = np.bitwise_or.reduceat(bits, start) if keys.size else bits
+            idx = voxel.lookup(self.keys, uk)
+            found = idx >= 0
+            self.masks[idx[found]] |= hit[found]
+            fresh = ~found
+            if fresh.any():
+                pos = np.searchsorted(self.keys, uk[fresh])
+                self.keys = np.insert(self.keys, pos, uk[fresh])
+                self.masks = np.insert(self.masks, pos, hit[fresh])
+        limit = np.uint64((1 << window) - 1) if window < 64 else np.uint64(0xFFFFFFFFFFFFFFFF)
+        self.masks &= limit
+        alive = self.masks != 0
+        if not alive.all():
+            self.keys, self.masks = self.keys[alive], self.masks[alive]
+        excess = self.keys.size - p.max_accumulator_voxels
+        if excess > 0:
+            counts = _popcount(self.masks)
+            drop = np.argpartition(counts, excess)[:excess]
+            keep = np.ones(self.keys.size, bool)
+            keep[drop] = False
+            self.keys, self.masks = self.keys[keep], self.masks[keep]
+
+    def static_keys(self) -> np.ndarray:
+        """Sorted keys of the voxels currently considered static (dilated as configured)."""
+        static = self.keys[_popcount(self.masks) >= self.params.static_min_bins]
+        return _dilate(static, self.params.static_dilation)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.keys.nbytes + self.masks.nbytes)
