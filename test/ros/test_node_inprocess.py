@@ -198,3 +198,39 @@ def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_
     # Silence: both inputs stale after stale_timeout.
     assert rig.detector.set_parameters([Parameter("stale_timeout", value=0.2)])[0].successful
     assert wait_for(lambda: detector_status().level == DiagnosticStatus.STALE, 5.0)
+
+
+def test_drone_cloud_built_only_when_subscribed(rclpy_context, small_sequence, wait_for):
+    import threading
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from clusterfilter_ros.ros.node import DetectorNode
+    from clusterfilter_ros.ros.record import PoseRecorder
+    from clusterfilter_ros.ros.replay import Replayer
+
+    detector = DetectorNode(context=rclpy_context)
+    client = rclpy.create_node("no_points_client", context=rclpy_context)
+    replayer, recorder = Replayer(client), PoseRecorder(client)  # poses only
+    calls = []
+    original = detector._detector.drone_points
+    detector._detector.drone_points = lambda: calls.append(1) or original()
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(detector)
+    executor.add_node(client)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    thread.start()
+    try:
+        assert replayer.wait_for_subscribers(20.0, ["/uav/pose"], settle=0.2)
+        replayer.play(small_sequence.frames, rate=4.0)
+        assert wait_for(
+            lambda: detector.counters()["processed"] == len(small_sequence.frames), 30.0
+        )
+        assert detector.counters()["estimates"] > 0 and len(recorder) > 0
+        assert calls == []  # nobody listens to /uav/points: the cloud was never made
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        thread.join(timeout=5.0)
+        detector.destroy_node()
+        client.destroy_node()
