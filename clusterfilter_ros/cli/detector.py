@@ -25,6 +25,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="NAME=VALUE",
         help="set one parameter (repeatable), e.g. -p eps=1.5 -p frame_id=world",
     )
+    p.add_argument(
+        "--ros-args",
+        dest="ros_args_tail",
+        nargs=argparse.REMAINDER,
+        default=None,
+        help="everything after this goes to ROS as is (remappings, -p name:=value, ...)",
+    )
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     p.set_defaults(func=run)
 
@@ -46,7 +53,9 @@ def ros_value(spec: ParamSpec, value: object) -> str:
 
 
 def ros_arguments(params_file: str | None, assignments: list[str], extra: list[str]) -> list[str]:
-    """The rclpy argument list for the node: program name, ``--ros-args``, files, values."""
+    """The rclpy argument list for the node: program name, then one ``--ros-args`` block
+    with the params file, the ``-p`` values and ``extra`` (ROS arguments given after
+    ``--`` or ``--ros-args`` on the command line)."""
     from pathlib import Path
 
     specs = {s.name: s for s in all_param_specs()}
@@ -63,12 +72,17 @@ def ros_arguments(params_file: str | None, assignments: list[str], extra: list[s
         if name not in specs:
             raise ParameterError(f"unknown parameter '{name}'")
         ros += ["-p", f"{name}:={ros_value(specs[name], value)}"]
-    if ros:
-        args += ["--ros-args", *ros]
-    return args + extra
+    if extra and extra[0] == "--ros-args":
+        extra = extra[1:]
+    if ros or extra:  # one ROS block: ours, then the user's ROS arguments
+        args += ["--ros-args", *ros, *extra]
+    return args
 
 
 def run(args: argparse.Namespace) -> int:
     from clusterfilter_ros.ros.node import main
 
-    return main(args=ros_arguments(args.params_file, args.param, args.ros_args))
+    extra = list(args.ros_args)
+    if args.ros_args_tail is not None:
+        extra = ["--ros-args", *args.ros_args_tail]
+    return main(args=ros_arguments(args.params_file, args.param, extra))

@@ -24,7 +24,9 @@ def test_detector_arguments_typed_for_ros():
     assert "eps:=1.0" in args  # a double must be written as one for ROS
     assert "target_offset:=[0.0,0.0,0.25]" in args
     assert "min_samples:=5" in args and "frame_id:=world" in args
-    assert args[-2:] == ["-r", "__node:=other"]
+    assert args[-2:] == ["-r", "__node:=other"] and args.count("--ros-args") == 1
+    merged = ros_arguments(None, ["eps=1.5"], ["--ros-args", "-r", "__node:=x"])
+    assert merged == ["clusterfilter-detector", "--ros-args", "-p", "eps:=1.5", "-r", "__node:=x"]
     with pytest.raises(ParameterError, match="unknown parameter 'epss'"):
         ros_arguments(None, ["epss=1"], [])
     with pytest.raises(ParameterError, match="eps"):
