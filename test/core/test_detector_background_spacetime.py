@@ -1,0 +1,76 @@
+"""Persistence map (static suppression), space-time clustering and motion coherence."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.background import BackgroundGrid, static_mask_offline
+from clusterfilter_ros.core.clustering import spacetime_cluster_points
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import motion_coherence
+
+
+def wall_and_track(seconds: int = 10, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    xyz, t, moving = [], [], []
+    for i in range(seconds * 10):
+        stamp = i * 0.1
+        wall = np.column_stack([np.full(50, 30.0), rng.uniform(-3, 3, 50), rng.uniform(5, 8, 50)])
+        drone = np.array([[-20 + 0.5 * i, 0.0, 15.0]])  # 5 m/s
+        xyz += [wall, drone]
+        t += [np.full(50, stamp), [stamp]]
+        moving += [np.zeros(50, bool), [True]]
+    return np.vstack(xyz), np.concatenate(t), np.concatenate(moving)
+
+
+def test_offline_persistence_masks_the_wall_not_the_drone():
+    xyz, t, moving = wall_and_track()
+    static = static_mask_offline(xyz, t, detector_params())
+    assert static[~moving].mean() > 0.99
+    assert not static[moving].any()
+
+
+def test_background_grid_learns_and_forgets():
+    params = detector_params({"global_window": 5.0, "static_bin": 1.0, "static_min_bins": 3})
+    grid = BackgroundGrid(params)
+    wall_key = voxel.voxel_keys(np.array([[30.0, 0.0, 5.0]]), params.static_voxel)
+    for second in range(4):
+        grid.update(wall_key, np.array([second + 0.5]), now=second + 0.9)
+    assert voxel.lookup(grid.static_keys(), wall_key)[0] >= 0
+    once = voxel.voxel_keys(np.array([[0.0, 0.0, 20.0]]), params.static_voxel)
+    grid.update(once, np.array([4.5]), now=4.9)
+    assert voxel.lookup(grid.static_keys(), once)[0] < 0
+    grid.update(np.empty(0, np.int64), np.empty(0), now=20.0)  # nothing for 15 s
+    assert grid.keys.size == 0
+
+
+def test_spacetime_clusters_split_in_time_and_follow_motion():
+    rng = np.random.default_rng(1)
+    # The same place visited twice, 5 s apart: two clusters (space-only would merge them).
+    a = rng.normal([0, 0, 20], 0.2, (20, 3))
+    b = rng.normal([0, 0, 20], 0.2, (20, 3))
+    t = np.concatenate([np.linspace(0, 0.5, 20), np.linspace(5, 5.5, 20)])
+    labels = spacetime_cluster_points(np.vstack([a, b]), t, 2.0, 0.5, 3)
+    assert labels.min() >= 0 and len(set(labels[:20])) == 1 and len(set(labels[20:])) == 1
+    assert labels[0] != labels[-1]
+    # A track at 4 m/s sampled every 0.2 s stays one cluster.
+    tt = np.arange(0, 6, 0.2)
+    track = np.column_stack([4 * tt, np.zeros_like(tt), np.full_like(tt, 20.0)])
+    labels = spacetime_cluster_points(track, tt, 2.0, 0.5, 3)
+    assert (labels >= 0).all() and len(set(labels.tolist())) == 1
+
+
+def test_motion_coherence_moving_vs_static():
+    rng = np.random.default_rng(2)
+    t = np.repeat(np.arange(0, 5, 0.1), 3)
+    moving = np.column_stack([3 * t, np.zeros_like(t), np.full_like(t, 20)]) + rng.normal(
+        0, 0.1, (t.size, 3)
+    )
+    static = rng.uniform([0, 0, 10], [4, 4, 14], (t.size, 3))
+    lab = np.concatenate([np.zeros(t.size, int), np.ones(t.size, int)])
+    coh = motion_coherence(lab, np.vstack([moving, static]), np.concatenate([t, t]), 2, 1.0)
+    assert coh[0] > 0.7 and coh[1] < 0.3  # straight 3 m/s track, 1 s windows: ~0.8
+    # A cluster seen in one window only carries no motion evidence.
+    one = motion_coherence(np.zeros(5, int), rng.normal(size=(5, 3)), np.zeros(5), 1, 1.0)
+    assert one[0] == 0.0
