@@ -101,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
     )
     ground_truth = sim.ground_truth()
     total = sum(sim.frame_count(s) for s in sim.sensors)
+    if total == 0:
+        raise ParameterError(f"--duration {sim.duration:g} s is shorter than one 0.1 s lidar frame")
     collector = PreviewCollector(expected_frames=total, seed=args.seed) if args.preview else None
     counts: list[tuple[float, str, int, int]] = []
 

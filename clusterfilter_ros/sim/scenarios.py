@@ -50,6 +50,8 @@ DEFAULT_PRISM_OFFSET = (0.0, 0.0, 0.25)
 #: Rows per file in the challenge format (Mid360 alternates, Avia fixed).
 PAD_ROWS = {MID360: [19968, 20064], AVIA: 24000}
 GRAVITY = 9.81
+#: Longest sequence the flight planners are asked for (s).
+MAX_DURATION = 86400.0
 
 
 @dataclass(frozen=True)
@@ -283,6 +285,11 @@ class Simulation:
             duration = spec.duration
         if not (isinstance(duration, int | float) and math.isfinite(duration) and duration > 0):
             raise ParameterError(f"duration must be a positive number of seconds, got {duration!r}")
+        if duration > MAX_DURATION:
+            raise ParameterError(
+                f"duration {duration:g} s is longer than the {MAX_DURATION:g} s (24 h) the "
+                "simulator plans flights for"
+            )
         if drone is not None:
             if drone not in DRONE_MODELS:
                 raise ParameterError(

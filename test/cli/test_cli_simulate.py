@@ -60,6 +60,7 @@ def test_user_errors_exit_2(tmp_path, capsys):
         (["--scenario", "no_drone", "--drone", "mavic2"], "has no drone"),
         (["--drone", "f16"], "unknown drone"),
         (["--duration", "-1"], "duration"),
+        (["--duration", "0.05"], "shorter than one 0.1 s lidar frame"),
         (["--preview", str(tmp_path / "x.jpg")], "expected a .png"),
     ]
     for extra, message in cases:

@@ -188,7 +188,7 @@ def test_bad_arguments_raise_parameter_errors():
         Simulation("default", drone="f16")
     with pytest.raises(ParameterError, match="has no drone"):
         Simulation("no_drone", drone="mavic2")
-    for bad in (0.0, -1.0, float("nan"), float("inf")):
+    for bad in (0.0, -1.0, float("nan"), float("inf"), 1e7, "20"):
         with pytest.raises(ParameterError, match="duration"):
             Simulation("default", duration=bad)
     with pytest.raises(ParameterError, match="seed"):
