@@ -253,10 +253,18 @@ class Actor:
     def table(self, t0: float, duration: float) -> PrimitiveTable:
         """Parts at frame start ``t0`` with their mean velocity over ``duration`` seconds."""
         self.update_shape(t0)
-        p0 = self.position(t0)
-        p1 = self.position(t0 + duration)
-        vel = (p1 - p0) / duration
-        yaw = self.heading(t0 + duration / 2)
+        times = np.array([t0, t0 + duration])
+        base = self.path.position(times)
+        pos = base
+        if self.wobble is not None:
+            pos = base + self.wobble.position(times) * self._wobble_gain(base)[:, None]
+        p0 = pos[0]
+        vel = (pos[1] - pos[0]) / duration
+        step = base[1] - base[0]
+        if math.hypot(step[0], step[1]) > 0.5 * duration:  # moving faster than 0.5 m/s
+            yaw = math.atan2(step[1], step[0])
+        else:
+            yaw = self.heading(t0 + duration / 2)
         c, s = math.cos(yaw), math.sin(yaw)
         off = self._offset
         world = np.stack(
@@ -299,15 +307,6 @@ class Bird(Actor):
         self.span = span
         self.beat_hz = beat_hz
         self.phase = phase
-
-    def headings(self, t: np.ndarray) -> np.ndarray:
-        """Vectorised :meth:`heading` for an array of times."""
-        t = np.asarray(t, dtype=np.float64)
-        v = self.path.velocity(t)
-        last = len(self._segment_heading) - 1
-        seg = np.clip(np.searchsorted(self.path.knot_times, t, side="right") - 1, 0, last)
-        moving = np.hypot(v[..., 0], v[..., 1]) > 0.5
-        return np.where(moving, np.arctan2(v[..., 1], v[..., 0]), self._segment_heading[seg])
 
     def update_shape(self, t: float) -> None:
         flap = 0.5 + 0.5 * math.sin(2 * math.pi * self.beat_hz * t + self.phase)
