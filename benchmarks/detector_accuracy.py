@@ -110,13 +110,20 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", nargs="+", type=int, default=[100, 101, 102])
     ap.add_argument("--modes", nargs="+", default=["offline", "stream"])
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument(
+        "--preset",
+        choices=("default", "paper"),
+        default="default",
+        help="paper: the paper's published settings (PAPER_PRESET) before any --param",
+    )
     ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
     ap.add_argument("--json", type=Path, help="also write all rows as JSON here")
     ap.add_argument("--markdown", action="store_true", help="print the summary as Markdown")
     args = ap.parse_args(argv)
-    from clusterfilter_ros.core.params import parse_assignments
+    from clusterfilter_ros.core.params import PAPER_PRESET, parse_assignments
 
-    values = parse_assignments(args.param)
+    values = dict(PAPER_PRESET) if args.preset == "paper" else {}
+    values.update(parse_assignments(args.param))
     rows = []
     for scenario in args.scenarios:
         for seed in args.seeds:

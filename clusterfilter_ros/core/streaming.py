@@ -6,8 +6,9 @@ State (all bounded whatever the stream length):
   ``static_voxel`` voxel, which of the last ``global_window`` seconds (in ``static_bin``
   bins) it was hit in; capped at ``max_accumulator_voxels``. Voxels hit in at least
   ``static_min_bins`` bins are static structure.
-- **Local history**: the filtered points of the last ``local_history`` seconds (capped
-  at ``max_local_points``), from which clusters, local windows and drone points come.
+- **Local history**: the filtered points of the last ``local_history`` seconds that were
+  not in a known static voxel when they arrived (capped at ``max_local_points``), from
+  which clusters, local windows and drone points come.
 - **Track**: per-frame mean positions of the selected cluster's points.
 
 Every ``recluster_period`` seconds of stream time the pending frames go into the
@@ -81,6 +82,7 @@ class StreamingDetector:
     def reset(self) -> None:
         """Forget everything seen so far (counters of pushed/rejected frames are kept)."""
         self._background = BackgroundGrid(self.params)
+        self._static = np.empty(0, np.int64)  # sorted static voxel keys (last re-clustering)
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
         self._chunks: deque[_Chunk] = deque()
         self._chunk_points = 0
@@ -125,9 +127,13 @@ class StreamingDetector:
             keep = self._denoise(frame.sensor, stamp, xyz)
             xyz, t = xyz[keep], t[keep]
         static_keys = voxel.voxel_keys(xyz, self.params.static_voxel)
+        self._pending.append((static_keys, t))
+        if self.params.static_suppression and self._static.size and xyz.shape[0]:
+            # Points in voxels already known static never reach the local history.
+            moving = voxel.lookup(self._static, static_keys) < 0
+            xyz, t, static_keys = xyz[moving], t[moving], static_keys[moving]
         self._chunks.append(_Chunk(stamp, xyz, t, static_keys))
         self._chunk_points += xyz.shape[0]
-        self._pending.append((static_keys, t))
         self._evict_chunks()
         if self._now - self._last_recluster >= self.params.recluster_period:
             self._recluster()
@@ -149,6 +155,7 @@ class StreamingDetector:
         """Sizes and timings of the state, for monitoring and benchmarks."""
         grid_bytes = self._background.nbytes
         local_bytes = sum(c.xyz.nbytes + c.t.nbytes + c.static_keys.nbytes for c in self._chunks)
+        local_bytes += self._static.nbytes
         pending_bytes = sum(k.nbytes + t.nbytes for k, t in self._pending)
         return {
             "accumulator_voxels": float(self._background.keys.size),
@@ -203,17 +210,17 @@ class StreamingDetector:
         else:
             keys, times = np.empty(0, np.int64), np.empty(0)
         self._background.update(keys, times, self._now)
+        self._static = self._background.static_keys()
+        if p.static_suppression and self._static.size:
+            self._drop_static_from_history()
         self._track.clear()
         self._selected_conf = 0.0
         self._clusters = 0
         self._foreground_points = 0
-        if self._chunks and self._chunk_points:
+        warming_up = self._now - self._origin < p.warmup
+        if self._chunks and self._chunk_points and not warming_up:
             xyz = np.concatenate([c.xyz for c in self._chunks])
             t = np.concatenate([c.t for c in self._chunks])
-            if p.static_suppression:
-                skeys = np.concatenate([c.static_keys for c in self._chunks])
-                moving = voxel.lookup(self._background.static_keys(), skeys) < 0
-                xyz, t = xyz[moving], t[moving]
             self._foreground_points = int(t.size)
             labels, k = relabel_compact(cluster_labels(xyz, t, p))
             self._clusters = k
@@ -232,6 +239,16 @@ class StreamingDetector:
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
+
+    def _drop_static_from_history(self) -> None:
+        """Remove points of voxels that have become static from the local history."""
+        for i, c in enumerate(self._chunks):
+            if c.xyz.shape[0] == 0:
+                continue
+            moving = voxel.lookup(self._static, c.static_keys) < 0
+            if not moving.all():
+                self._chunk_points -= int(np.count_nonzero(~moving))
+                self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
 
     def _rebuild_track(self, mask: np.ndarray, xyz: np.ndarray, t: np.ndarray) -> None:
         pts, tt = xyz[mask], t[mask]
