@@ -210,7 +210,13 @@ def test_drone_cloud_built_only_when_subscribed(rclpy_context, small_sequence, w
     from clusterfilter_ros.ros.record import PoseRecorder
     from clusterfilter_ros.ros.replay import Replayer
 
-    detector = DetectorNode(context=rclpy_context)
+    from rclpy.parameter import Parameter
+
+    overrides = {"sync_timeout": 1.0, "qos_depth": 1000, "max_queue": 1000}
+    detector = DetectorNode(
+        context=rclpy_context,
+        parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
+    )
     client = rclpy.create_node("no_points_client", context=rclpy_context)
     replayer, recorder = Replayer(client), PoseRecorder(client)  # poses only
     calls = []
@@ -223,10 +229,10 @@ def test_drone_cloud_built_only_when_subscribed(rclpy_context, small_sequence, w
     thread.start()
     try:
         assert replayer.wait_for_subscribers(20.0, ["/uav/pose"], settle=0.2)
+        n = len(small_sequence.frames)
         replayer.play(small_sequence.frames, rate=4.0)
-        assert wait_for(
-            lambda: detector.counters()["processed"] == len(small_sequence.frames), 30.0
-        )
+        assert wait_for(lambda: sum(detector.counters()["received"].values()) == n, 30.0)
+        assert detector.wait_until_idle(30.0)
         assert detector.counters()["estimates"] > 0 and len(recorder) > 0
         assert calls == []  # nobody listens to /uav/points: the cloud was never made
     finally:
