@@ -205,12 +205,11 @@ def test_drone_cloud_built_only_when_subscribed(rclpy_context, small_sequence, w
 
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
 
     from clusterfilter_ros.ros.node import DetectorNode
     from clusterfilter_ros.ros.record import PoseRecorder
     from clusterfilter_ros.ros.replay import Replayer
-
-    from rclpy.parameter import Parameter
 
     overrides = {"sync_timeout": 1.0, "qos_depth": 1000, "max_queue": 1000}
     detector = DetectorNode(
