@@ -29,7 +29,8 @@ class ParamSpec:
 
     ``kind`` is one of ``bool``, ``int``, ``float``, ``str``, ``float_list``, ``str_list``.
     ``minimum``/``maximum`` bound numbers (and every element of a float list);
-    ``length`` fixes the length of a list; ``choices`` restricts strings.
+    ``length`` fixes the length of a list; ``choices`` restricts strings (and every
+    element of a string list).
     """
 
     name: str
@@ -68,10 +69,14 @@ class ParamSpec:
                     raise ParameterError(
                         f"parameter '{self.name}' = {item} is above its maximum {self.maximum}"
                     )
-        if self.choices is not None and coerced not in self.choices:
-            raise ParameterError(
-                f"parameter '{self.name}' = {coerced!r} is not one of {list(self.choices)}"
-            )
+        if self.choices is not None:
+            # A string must be one of the choices; a string list may only hold choices.
+            bad = [v for v in items if v not in self.choices]
+            if bad:
+                raise ParameterError(
+                    f"parameter '{self.name}' = {coerced!r}: {bad[0]!r} is not one of "
+                    f"{list(self.choices)}"
+                )
         return coerced
 
     def range_text(self) -> str:
@@ -234,6 +239,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "str_list",
         ["avia"],
         "Sensors whose points pass the density denoise (paper 3.1: the Avia); empty list = none.",
+        choices=("avia", "mid360"),
     ),
     ParamSpec(
         "denoise_voxel",

@@ -319,6 +319,7 @@ INVALID_UPDATES = [
     ("avia_extrinsic", [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
     ("mid360_extrinsic", [math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]),
     ("scoring", "magic"),
+    ("denoise_sensors", ["sonar"]),
     ("avia_topic", "/elsewhere"),
     ("qos_depth", 5),
     ("stale_timeout", -1.0),
