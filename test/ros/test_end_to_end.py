@@ -28,7 +28,13 @@ def test_detector_replay_recorder_processes(tmp_path, ros_env, small_sequence):
     csv = tmp_path / "poses.csv"
     detector = processes.start(
         "detector",
-        processes.cli_command("detector", "--params-file", str(config_file("detector.yaml"))),
+        processes.cli_command(
+            "detector",
+            "--params-file",
+            str(config_file("detector.yaml")),
+            "-p",
+            "sync_timeout=1.0",  # margin for a busy CI machine; order must never need it
+        ),
         ros_env,
         logs,
     )
