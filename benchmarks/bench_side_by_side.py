@@ -92,8 +92,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     scenarios = QUICK_SCENARIOS if quick else SCENARIOS
     base_params = detector_params()
     rows, runs = [], []
-    pooled = {"reference": [], "product": []}
-    hits = {"reference": [0.0, 0], "product": [0.0, 0]}
+    methods = ("reference (paper score)", "reference (mean score)", "product offline")
+    pooled: dict[str, list[np.ndarray]] = {m: [] for m in methods}
+    hits = {m: [0.0, 0] for m in methods}
+    false_alarm = {m: 0.0 for m in methods}
     totals = {"reference": 0.0, "product": 0.0}
     profiles: dict[str, str] = {}
 
@@ -114,95 +116,95 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         product = detect_offline(frames, params, timestamps=stamps)
         t_product = time.perf_counter() - tic
 
-        ref_params = ReferenceParams(target_offset=tuple(offset))
+        # Quick runs keep exact DBSCAN out of CI time (its memory check allows less).
+        ref_params = ReferenceParams(
+            target_offset=tuple(offset), max_dbscan_gb=0.1 if quick else 4.0
+        )
         tic = time.perf_counter()
         reference = reference_detect(frames, stamps, ref_params)
         # The reference's memory check (is exact DBSCAN affordable?) is not the method.
         t_reference = time.perf_counter() - tic - reference.timings.get("memory_check", 0.0)
-
-        m_prod = _metrics(product.estimates, sim)
-        m_ref = _metrics(reference.estimate, sim)
         totals["reference"] += t_reference
         totals["product"] += t_product
-        for name, m in (("reference", m_ref), ("product", m_prod)):
-            pooled[name].append(m["errors"])
+
+        metrics = {
+            methods[0]: _metrics(reference.estimates["sum"], sim),
+            methods[1]: _metrics(reference.estimates["mean"], sim),
+            methods[2]: _metrics(product.estimates, sim),
+        }
+        run_record: dict[str, Any] = {
+            "scenario": scenario,
+            "reference_s": t_reference,
+            "product_s": t_product,
+            "ratio": t_reference / t_product,
+            "reference_points": reference.n_points_clustered,
+            "reference_mode": reference.dbscan_mode,
+            "reference_timings": reference.timings,
+        }
+        for method in methods:
+            m = metrics[method]
+            pooled[method].append(m["errors"])
+            false_alarm[method] += m["false_alarm_s"]
             if m.get("n_observable"):
-                hits[name][0] += m["observable_hits"]
-                hits[name][1] += m["n_observable"]
-        runs.append(
-            {
-                "scenario": scenario,
-                "reference_s": t_reference,
-                "product_s": t_product,
-                "ratio": t_reference / t_product,
-                "reference_rmse": m_ref["rmse"],
-                "product_rmse": m_prod["rmse"],
-                "reference_detection": m_ref["detection_rate"],
-                "product_detection": m_prod["detection_rate"],
-                "reference_observable_detection": m_ref["observable_detection_rate"],
-                "product_observable_detection": m_prod["observable_detection_rate"],
-                "reference_false_alarm_s": m_ref["false_alarm_s"],
-                "product_false_alarm_s": m_prod["false_alarm_s"],
-                "reference_points": reference.n_points_clustered,
-                "reference_mode": reference.dbscan_mode,
-                "reference_timings": reference.timings,
-            }
-        )
-        r = runs[-1]
-        rows.append(
-            [
-                scenario,
-                r["reference_points"],
-                r["reference_mode"],
-                t_reference,
-                t_product,
-                r["ratio"],
-                r["reference_rmse"],
-                r["product_rmse"],
-                r["reference_detection"],
-                r["product_detection"],
-                r["reference_observable_detection"],
-                r["product_observable_detection"],
-                r["reference_false_alarm_s"],
-                r["product_false_alarm_s"],
-            ]
-        )
+                hits[method][0] += m["observable_hits"]
+                hits[method][1] += m["n_observable"]
+            is_product = method == methods[2]
+            key = "product" if is_product else ("reference" if "paper" in method else "mean")
+            run_record[f"{key}_rmse"] = m["rmse"]
+            run_record[f"{key}_detection"] = m["detection_rate"]
+            run_record[f"{key}_observable_detection"] = m["observable_detection_rate"]
+            run_record[f"{key}_false_alarm_s"] = m["false_alarm_s"]
+            rows.append(
+                [
+                    scenario,
+                    method,
+                    f"{reference.n_points_clustered:,} pts, {reference.dbscan_mode}"
+                    if not is_product
+                    else "",
+                    t_product if is_product else t_reference,
+                    run_record["ratio"] if is_product else None,
+                    m["rmse"],
+                    m["detection_rate"],
+                    m["observable_detection_rate"],
+                    m["false_alarm_s"],
+                ]
+            )
+        runs.append(run_record)
         print(
             f"{scenario}: reference {t_reference:.2f} s ({reference.dbscan_mode}), "
-            f"product {t_product:.3f} s, ratio {r['ratio']:.1f}; RMSE ref {m_ref['rmse']} "
-            f"prod {m_prod['rmse']}",
+            f"product {t_product:.3f} s, ratio {run_record['ratio']:.1f}; "
+            + "; ".join(f"{k}: RMSE {fmt(v['rmse'])}" for k, v in metrics.items()),
             flush=True,
         )
 
-    def pooled_rmse(name: str) -> float | None:
-        errs = np.concatenate(pooled[name]) if pooled[name] else np.empty(0)
+    def pooled_rmse(method: str) -> float | None:
+        errs = np.concatenate(pooled[method]) if pooled[method] else np.empty(0)
         return float(np.sqrt(np.mean(errs**2))) if errs.size else None
 
-    def pooled_obs(name: str) -> float | None:
-        h, n = hits[name]
+    def pooled_obs(method: str) -> float | None:
+        h, n = hits[method]
         return h / n if n else None
 
     ratio = totals["reference"] / totals["product"] if totals["product"] > 0 else None
-    ref_rmse, prod_rmse = pooled_rmse("reference"), pooled_rmse("product")
-    ref_obs, prod_obs = pooled_obs("reference"), pooled_obs("product")
-    rows.append(
-        [
-            "all (pooled)",
-            None,
-            "",
-            totals["reference"],
-            totals["product"],
-            ratio,
-            ref_rmse,
-            prod_rmse,
-            None,
-            None,
-            ref_obs,
-            prod_obs,
-            sum(r["reference_false_alarm_s"] for r in runs),
-            sum(r["product_false_alarm_s"] for r in runs),
-        ]
-    )
+    for method in methods:
+        is_product = method == methods[2]
+        rows.append(
+            [
+                "all (pooled)",
+                method,
+                "",
+                totals["product"] if is_product else totals["reference"],
+                ratio if is_product else None,
+                pooled_rmse(method),
+                None,
+                pooled_obs(method),
+                false_alarm[method],
+            ]
+        )
+    prod_rmse, prod_obs = pooled_rmse(methods[2]), pooled_obs(methods[2])
+    # The better of the two reference rankings is the bar for "no loss of accuracy".
+    ref_method = max(methods[:2], key=lambda m: pooled_obs(m) or 0.0)
+    ref_rmse, ref_obs = pooled_rmse(ref_method), pooled_obs(ref_method)
     # "No loss of accuracy": detection on observable samples not lower (1 point of slack)
     # and, where both produced matched estimates, pooled RMSE not more than 5% above the
     # reference's.
@@ -228,7 +230,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         target_row(
             "offline accuracy vs reference (pooled observable detection rate; pooled RMSE)",
             "no loss (detection >= reference - 0.01, RMSE <= 1.05 x reference)",
-            f"product {fmt(prod_obs)} vs reference {fmt(ref_obs)}; "
+            f"product {fmt(prod_obs)} vs {ref_method} {fmt(ref_obs)}; "
             f"RMSE {fmt(prod_rmse)} vs {fmt(ref_rmse)} m",
             no_loss,
         ),
@@ -242,23 +244,20 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 f"same {duration:g} s sequences, same process",
                 "columns": [
                     "scenario",
-                    "points clustered (ref)",
-                    "ref DBSCAN",
-                    "ref s",
-                    "product s",
-                    "speed ratio",
-                    "ref RMSE m",
-                    "product RMSE m",
-                    "ref detection",
-                    "product detection",
-                    "ref detection (observable)",
-                    "product detection (observable)",
-                    "ref false-alarm s",
-                    "product false-alarm s",
+                    "method",
+                    "reference input",
+                    "wall s",
+                    "speed ratio (ref s / product s)",
+                    "RMSE m",
+                    "detection rate",
+                    "detection rate (observable)",
+                    "false-alarm s",
                 ],
                 "rows": rows,
-                "note": f"Simulated scenarios, seed {SEED}, prism offset given to both. "
-                "'ref DBSCAN' says whether scikit-learn DBSCAN ran on every point (exact) or, "
+                "note": f"Simulated scenarios, seed {SEED}, prism offset given to both. The "
+                "two reference rows share one run (same clusters, two rankings: the paper's "
+                "sums, or the same terms averaged per window), hence one wall time. "
+                "'reference input' says whether scikit-learn DBSCAN ran on every point (exact) or, "
                 "where that would need more memory than the machine has, on 0.15 m voxel "
                 "centroids weighted by their counts (faster than the literal method, so the "
                 "speed ratio is a lower bound); the time of that memory check is not counted.",

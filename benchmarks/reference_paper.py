@@ -34,15 +34,17 @@ Pipeline (defaults are the authors' published ones, see REFERENCE section 1):
    clipped to ``[iou_floor, 1]`` so a disjoint pair scores a finite ``log(1/iou_floor)``.
    The best-scoring candidate is the drone.
 7. Trajectory (3.4): the selected points, ordered by time, are grouped per frame
-   (centroid, weight = point count); a cubic smoothing B-spline per axis
-   (``scipy.interpolate.splrep``, k=3) through them is evaluated at the requested
+   (centroid, weight = point count); a cubic smoothing spline per axis
+   (``scipy.interpolate.make_smoothing_spline``, smoothing chosen by generalised
+   cross-validation) through them is evaluated at the requested
    stamps inside the time span the points cover and within ``max_gap`` (1 s) of a frame
    with selected points (no estimate elsewhere).
 
 Choices the paper leaves open are written down here: the frame = 0.1 s slot of both
 lidars; per-point times (``Frame.point_time``) are used when the frames carry them;
-lambda = 1; the smoothing factor of the spline is the number of frames with points
-times ``spline_sigma**2``.
+lambda = 1. ``score_mode="sum"`` (default) ranks by the paper's sums; ``"mean"`` by the
+same terms averaged over windows. Both rankings come out of one run
+(``ReferenceResult.estimates``), since they share everything up to the scores.
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import splev, splrep
+from scipy.interpolate import make_smoothing_spline
 from sklearn.cluster import DBSCAN
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame, TimedPositions
@@ -74,7 +76,7 @@ class ReferenceParams:
     score_lambda: float = 1.0
     iou_floor: float = 1e-3
     frame_period: float = 0.1
-    spline_sigma: float = 0.3
+    score_mode: str = "sum"
     max_gap: float = 1.0
     target_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     max_dbscan_gb: float = 4.0
@@ -86,12 +88,14 @@ class ReferenceResult:
     """What the reference run produced.
 
     Attributes:
-        estimate: positions at the requested stamps where the spline covers them.
+        estimate: positions at the requested stamps where the spline covers them, for the
+            cluster ranked best by ``params.score_mode``.
         drone_xyz: (K, 3) points of the selected cluster.
         drone_time: (K,) times of those points (s).
         n_points_clustered: size of the global cloud given to DBSCAN.
         n_candidates: global clusters that passed the gates.
         dbscan_mode: ``exact`` (DBSCAN on every point) or ``voxel-weighted`` (fallback).
+        estimates: the estimate for each score mode (``sum``, ``mean``).
         scores: score of each candidate (same order as the candidates).
         timings: wall seconds per stage.
     """
@@ -104,6 +108,7 @@ class ReferenceResult:
     scores: list[float] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     dbscan_mode: str = "exact"
+    estimates: dict[str, TimedPositions] = field(default_factory=dict)
 
 
 def _frame_points(frames: list[Frame]) -> tuple[np.ndarray, np.ndarray]:
@@ -181,14 +186,23 @@ def denoise_avia(xyz: np.ndarray, params: ReferenceParams) -> np.ndarray:
 
 def score_cluster(
     xyz: np.ndarray, frame_index: np.ndarray, n_frames: int, params: ReferenceParams
-) -> float:
-    """The paper's score of one global cluster: sum exp(R) + lambda * sum log(1/IoU)."""
+) -> tuple[float, float]:
+    """Score of one global cluster: the paper's sums, and the same terms averaged.
+
+    Returns ``(sum exp(R) + lambda * sum log(1/IoU), mean exp(R) + lambda * mean
+    log(1/IoU))`` over the non-empty windows (and consecutive non-empty pairs) of every
+    window length. The sums are the paper's formula; the means are the one change that
+    stops long-lived background clusters from winning just by being present in more
+    windows.
+    """
     voxel_volume = params.voxel_size**3
     global_density = len(xyz) / (len(_voxel_keys(xyz, params.voxel_size)) * voxel_volume)
     order = np.argsort(frame_index, kind="stable")
     xyz, frame_index = xyz[order], frame_index[order]
     score_density = 0.0
     score_iou = 0.0
+    n_windows = 0
+    n_pairs = 0
     for length in params.window_lengths:
         previous_keys: np.ndarray | None = None
         for start in range(0, max(n_frames - length, 0) + 1):
@@ -199,13 +213,17 @@ def score_cluster(
             keys = _voxel_keys(xyz[lo:hi], params.voxel_size)
             local_density = (hi - lo) / (len(keys) * voxel_volume)
             score_density += float(np.exp(local_density / global_density))
+            n_windows += 1
             if previous_keys is not None:
                 inter = len(np.intersect1d(previous_keys, keys, assume_unique=True))
                 union = len(previous_keys) + len(keys) - inter
                 iou = min(max(inter / union, params.iou_floor), 1.0)
                 score_iou += float(np.log(1.0 / iou))
+                n_pairs += 1
             previous_keys = keys
-    return score_density + params.score_lambda * score_iou
+    total = score_density + params.score_lambda * score_iou
+    mean = score_density / max(n_windows, 1) + params.score_lambda * score_iou / max(n_pairs, 1)
+    return total, mean
 
 
 def fit_trajectory(
@@ -238,15 +256,11 @@ def fit_trajectory(
     if not inside.any():
         return empty
     query = stamps[inside]
-    if len(t) < 4:
+    if len(t) < 5:
         out = np.stack([np.interp(query, t, centroid[:, a]) for a in range(3)], axis=1)
     else:
-        weights = np.sqrt(counts) / params.spline_sigma
         out = np.stack(
-            [
-                splev(query, splrep(t, centroid[:, a], w=weights, k=3, s=float(len(t))))
-                for a in range(3)
-            ],
+            [make_smoothing_spline(t, centroid[:, a], w=counts)(query) for a in range(3)],
             axis=1,
         )
     return TimedPositions(query, out + np.asarray(params.target_offset, dtype=np.float64))
@@ -320,14 +334,15 @@ def reference_detect(
     timings["gates"] = time.perf_counter() - tic
 
     tic = time.perf_counter()
-    scores = [score_cluster(xyz[m], frame_stamp_index[m], n_frames, params) for m in candidates]
+    both = [score_cluster(xyz[m], frame_stamp_index[m], n_frames, params) for m in candidates]
     timings["local_scoring"] = time.perf_counter() - tic
 
     tic = time.perf_counter()
+    empty_estimate = TimedPositions(np.empty(0), np.empty((0, 3)))
     if not candidates:
         timings["spline"] = 0.0
         return ReferenceResult(
-            TimedPositions(np.empty(0), np.empty((0, 3))),
+            empty_estimate,
             np.empty((0, 3)),
             np.empty(0),
             len(xyz),
@@ -335,14 +350,29 @@ def reference_detect(
             [],
             timings,
             mode,
+            {"sum": empty_estimate, "mean": empty_estimate},
         )
-    best = candidates[int(np.argmax(scores))]
-    estimate = fit_trajectory(
-        xyz[best], times[best], frame_stamp_index[best], np.asarray(stamps), params
-    )
+    estimates: dict[str, TimedPositions] = {}
+    chosen: dict[str, np.ndarray] = {}
+    for column, name in enumerate(("sum", "mean")):
+        best = candidates[int(np.argmax([b[column] for b in both]))]
+        chosen[name] = best
+        estimates[name] = fit_trajectory(
+            xyz[best], times[best], frame_stamp_index[best], np.asarray(stamps), params
+        )
     timings["spline"] = time.perf_counter() - tic
+    best = chosen[params.score_mode]
+    scores = [b[0 if params.score_mode == "sum" else 1] for b in both]
     return ReferenceResult(
-        estimate, xyz[best], times[best], len(xyz), len(candidates), scores, timings, mode
+        estimates[params.score_mode],
+        xyz[best],
+        times[best],
+        len(xyz),
+        len(candidates),
+        scores,
+        timings,
+        mode,
+        estimates,
     )
 
 
