@@ -206,7 +206,11 @@ def _write_json(
     from benchlib import percentiles as pct
 
     lat = pct(latencies, (50, 95, 99))
-    command = "python benchmarks/bench_node.py" + (" --quick" if args.quick else "")
+    command = (
+        f"python benchmarks/bench_node.py --scenario {args.scenario} --seed {args.seed}"
+        + (f" --rate {args.rate:g}" if args.rate != 1.0 else "")
+        + (" --quick" if args.quick else "")
+    )
     p99 = lat["p99"] if latencies else None
     result = {
         "benchmark": "node",
