@@ -83,12 +83,17 @@ def dedupe(pred: TimedPositions) -> TimedPositions:
     return TimedPositions(pred.stamps[keep], pred.xyz[keep])
 
 
-def run_case(sim, mode: str, values: dict) -> tuple[dict, TimedPositions, float]:
+def run_case(
+    sim, mode: str, values: dict, plot: Path | None = None
+) -> tuple[dict, TimedPositions, float]:
     params = detector_params({**values, "target_offset": [float(v) for v in sim.prism_offset]})
     frames = sim.sequence.frames
     start = time.perf_counter()
+    drone_points = None
     if mode == "offline":
-        pred = detect_offline(frames, params).estimates
+        result = detect_offline(frames, params)
+        pred = result.estimates
+        drone_points = result.drone_points
     else:
         pred = estimates_to_positions(run_streaming(frames, params))
     seconds = time.perf_counter() - start
@@ -101,6 +106,17 @@ def run_case(sim, mode: str, values: dict) -> tuple[dict, TimedPositions, float]
     else:
         obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
     res = evaluate(pred, gt, observable=obs, duration=duration)
+    if plot is not None:
+        from clusterfilter_ros.plots import plot_evaluation
+
+        plot_evaluation(
+            gt if len(gt) else None,
+            pred,
+            plot,
+            drone_points=drone_points,
+            title=f"{sim.scenario} seed {sim.seed}, {mode}: RMSE {_f(res.as_dict()['rmse'])} m,"
+            f" detection {_f(res.as_dict()['observable_detection_rate'])} of observable time",
+        )
     return res.as_dict(), pred, seconds
 
 
@@ -119,6 +135,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
     ap.add_argument("--json", type=Path, help="also write all rows as JSON here")
     ap.add_argument("--markdown", action="store_true", help="print the summary as Markdown")
+    ap.add_argument("--plot-dir", type=Path, help="write one evaluation plot per run here")
     args = ap.parse_args(argv)
     from clusterfilter_ros.core.params import PAPER_PRESET, parse_assignments
 
@@ -129,7 +146,10 @@ def main(argv=None) -> int:
         for seed in args.seeds:
             sim = load_sim(scenario, seed, args.cache)
             for mode in args.modes:
-                metrics, _, seconds = run_case(sim, mode, values)
+                plot = None
+                if args.plot_dir is not None:
+                    plot = args.plot_dir / f"{scenario}_s{seed}_{mode}.png"
+                metrics, _, seconds = run_case(sim, mode, values, plot)
                 row = {"scenario": scenario, "seed": seed, "mode": mode, "seconds": seconds}
                 row.update(metrics)
                 rows.append(row)

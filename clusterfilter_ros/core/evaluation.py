@@ -143,6 +143,8 @@ def evaluate(
     else:
         fa_pred = pred
     fa = false_alarm_seconds(fa_pred, max_gap) if len(fa_pred) else 0.0
+    if duration > 0:
+        fa = min(fa, float(duration))
     return EvaluationResult(
         n_gt=n_gt,
         n_pred=len(pred),
