@@ -5,8 +5,12 @@ The detector must see frames in the same order whatever the timing of their arri
 answers as the offline streaming run on the same frames. :class:`StampMerger` holds a
 small buffer per lidar and releases the frame with the smallest ``(stamp, sensor)`` key
 as soon as no other lidar can still deliver a smaller one, i.e. once every other lidar
-has either a frame queued or has already sent a stamp at least as late. If a lidar is
-silent, a frame is released anyway after ``sync_timeout`` seconds of wall clock.
+has either a frame queued or has already sent a stamp at least as late, or can no longer
+send an earlier one because its next stamp is due no sooner than ``min_frame_interval``
+after its last (a Livox at 10 Hz sends one frame every 0.1 s). That prediction keeps the
+wait to the offset between the lidars' stamps (a few ms) instead of a whole frame
+period. If a lidar is silent, a frame is released anyway after ``sync_timeout`` seconds
+of wall clock.
 
 Each lidar's own messages are assumed to arrive in stamp order (one DDS writer per
 topic). A stamp earlier than the same lidar's previous one by more than
@@ -68,6 +72,9 @@ class StampMerger:
         max_queue: most frames held over all lidars; the oldest is dropped beyond it.
         backwards_tolerance: a stamp going back by more than this (s) starts a new
             generation; smaller steps back are dropped as late.
+        min_frame_interval: shortest interval (s) between two stamps of one lidar; a
+            frame is released without waiting for a lidar whose last stamp plus this
+            interval is already later. 0 disables the prediction (always wait).
     """
 
     def __init__(
@@ -76,11 +83,13 @@ class StampMerger:
         sync_timeout: float = 0.25,
         max_queue: int = 50,
         backwards_tolerance: float = 0.5,
+        min_frame_interval: float = 0.0,
     ) -> None:
         self.sensors = tuple(sensors)
         self.sync_timeout = float(sync_timeout)
         self.max_queue = int(max_queue)
         self.backwards_tolerance = float(backwards_tolerance)
+        self.min_frame_interval = float(min_frame_interval)
         self.generation = 0
         self.counts = MergerCounts()
         self._queues: dict[str, collections.deque[tuple[Frame, float]]] = {
@@ -163,7 +172,12 @@ class StampMerger:
             if other == sensor or self._queues[other]:
                 continue
             last = self._last_received.get(other)
-            if last is None or last < stamp:
+            if last is None:
+                return True
+            if self.min_frame_interval > 0.0:
+                if last + self.min_frame_interval <= stamp:
+                    return True
+            elif last < stamp:
                 return True
         return False
 

@@ -214,6 +214,7 @@ class DetectorNode(Node):
             sync_timeout=values["sync_timeout"],
             max_queue=values["max_queue"],
             backwards_tolerance=values["backwards_tolerance"],
+            min_frame_interval=values["min_frame_interval"],
         )
         self._inputs = {s: _InputStats() for s in SENSORS}
         self._period = _PeriodStats()
@@ -456,6 +457,8 @@ class DetectorNode(Node):
                     self._merger.max_queue = changes["max_queue"]
                 if "backwards_tolerance" in changes:
                     self._merger.backwards_tolerance = changes["backwards_tolerance"]
+                if "min_frame_interval" in changes:
+                    self._merger.min_frame_interval = changes["min_frame_interval"]
                 if "path_length" in changes:
                     self._path = collections.deque(self._path, maxlen=changes["path_length"])
                 self._cond.notify_all()

@@ -70,6 +70,17 @@ NODE_PARAMS: tuple[ParamSpec, ...] = (
         read_only=True,
     ),
     ParamSpec(
+        "min_frame_interval",
+        "float",
+        0.05,
+        "Shortest interval (s) between two stamps of one lidar (0.1 s at 10 Hz); the merge "
+        "releases a frame without waiting for a lidar whose next frame cannot sort before "
+        "it. 0 always waits for the other lidar's next frame.",
+        minimum=0.0,
+        maximum=10.0,
+        group="node",
+    ),
+    ParamSpec(
         "sync_timeout",
         "float",
         0.25,

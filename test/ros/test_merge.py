@@ -90,3 +90,38 @@ def test_loop_with_other_lidar_tail_in_flight_resets_once():
         (100.0, "avia", 1),
         (100.0, "mid360", 1),
     ]
+
+
+def test_min_frame_interval_releases_without_waiting_a_whole_period():
+    """With 10 Hz lidars offset by 3 ms, each frame goes as soon as the other lidar's
+    next stamp can no longer sort before it; the order is still (stamp, sensor)."""
+    merger = StampMerger(SENSORS, sync_timeout=10.0, min_frame_interval=0.05)
+    released = []
+    for i in range(5):
+        t = 0.1 * i
+        merger.add(frame("mid360", t), now=0.0)
+        released += merger.pop_ready(now=0.0)
+        merger.add(frame("avia", t + 0.003), now=0.0)
+        batch = merger.pop_ready(now=0.0)
+        # the avia frame at t+3 ms goes at once: mid360's next stamp is >= t + 50 ms
+        assert [m.frame.sensor for m in batch][-1:] == ["avia"] or i == 0
+        released += batch
+    order = [(m.frame.stamp, m.frame.sensor) for m in released]
+    assert order == sorted(order)
+    assert len(merger) == 0 and merger.counts.released_by_timeout == 0
+
+
+def test_min_frame_interval_still_waits_when_the_other_may_be_earlier():
+    merger = StampMerger(SENSORS, sync_timeout=10.0, min_frame_interval=0.05)
+    merger.add(frame("avia", 1.0), now=0.0)
+    merger.add(frame("mid360", 1.01), now=0.0)
+    # avia's next stamp is >= 1.05, so mid360 at 1.01 need not wait for it
+    assert [m.frame.stamp for m in merger.pop_ready(now=0.0)] == [1.0, 1.01]
+    merger.add(frame("mid360", 1.2), now=0.0)
+    # avia may still send 1.1 (1.0 + 0.05 <= 1.2): mid360 at 1.2 waits for it
+    assert merger.pop_ready(now=0.0) == []
+    merger.add(frame("avia", 1.1), now=0.0)
+    # avia's next may still come at 1.15..1.2: 1.2 keeps waiting until it does
+    assert [m.frame.stamp for m in merger.pop_ready(now=0.0)] == [1.1]
+    merger.add(frame("avia", 1.203), now=0.0)
+    assert [m.frame.stamp for m in merger.pop_ready(now=0.0)] == [1.2, 1.203]
