@@ -50,7 +50,7 @@ SUITE: list[tuple[str, str, tuple[str, ...], int, int, bool]] = [
     # A scenario where the streaming detector reports the drone, so poses (and with them
     # latencies) exist for a good share of the frames.
     ("node", "bench_node.py", ("--scenario", "avia_only", "--seed", "100"), 180, 90, True),
-    ("memory", "bench_memory.py", ("--budget", "240"), 420, 90, True),
+    ("memory", "bench_memory.py", ("--budget", "220"), 420, 90, True),
     ("detector", "bench_detector.py", (), 240, 90, True),
     ("simulate", "bench_simulate.py", (), 120, 60, True),
     ("io", "bench_io.py", (), 120, 60, True),
