@@ -186,6 +186,7 @@ CASES = [
     ("replay-empty-folder", "replay {R}/empty", "{R}/empty"),
     ("replay-no-lidar-files", "replay {R}/emptyseq", "{R}/emptyseq"),
     ("replay-truncated-bag", "replay {R}/b1t.bag", "{R}/b1t.bag"),
+    ("replay-unknown-topic", "replay {R}/bag2 --topic /nope=avia", "/nope"),
     ("replay-rate-nan", "replay {R}/seq --rate nan", "--rate"),
     ("replay-missing-gt", "replay {R}/seq --ground-truth {R}/nope.csv", "{R}/nope.csv"),
 ]
