@@ -309,7 +309,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "warmup",
         "float",
-        5.0,
+        3.0,
         "Streaming: no estimates during the first seconds of a stream (the persistence "
         "map is still empty).",
         minimum=0.0,
@@ -345,7 +345,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "cluster_voxel",
         "float",
         2.0,
-        "Voxel edge (m) of the voxel clusterer; its 3x3x3 neighbourhood plays DBSCAN's eps ball.",
+        "Voxel edge (m) of the voxel clusterer; its 3x3x3 neighbourhood plays DBSCAN's eps "
+        "ball (1.0 matches the paper's eps 2.0).",
         minimum=0.05,
         maximum=20.0,
     ),
@@ -560,8 +561,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "global_window",
         "float",
         20.0,
-        "Streaming: seconds of history in the global accumulator (voxel counts decay with "
-        "this time constant and voxels unseen for this long are dropped).",
+        "Streaming: seconds the persistence map (static suppression) remembers; at most 64 "
+        "static_bin bins are used.",
         minimum=0.5,
         maximum=600.0,
     ),
@@ -577,7 +578,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "local_history",
         "float",
         10.0,
-        "Streaming: seconds of raw points kept for the local windows and drone points.",
+        "Streaming: seconds of non-static points kept and re-clustered (the global cloud "
+        "of the streaming detector).",
         minimum=0.2,
         maximum=60.0,
     ),
@@ -585,7 +587,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "max_accumulator_voxels",
         "int",
         400000,
-        "Streaming: cap on occupied voxels in the global accumulator (weakest dropped first).",
+        "Streaming: cap on voxels in the persistence map (least-hit dropped first).",
         minimum=1000,
         maximum=100000000,
     ),
@@ -593,7 +595,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "max_local_points",
         "int",
         300000,
-        "Streaming: cap on raw points kept for the local windows (oldest frames dropped first).",
+        "Streaming: cap on points in the local history (oldest frames dropped first).",
         minimum=1000,
         maximum=100000000,
     ),

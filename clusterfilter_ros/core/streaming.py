@@ -161,6 +161,7 @@ class StreamingDetector:
             "accumulator_voxels": float(self._background.keys.size),
             "accumulator_bytes": float(grid_bytes),
             "local_points": float(self._chunk_points),
+            "accumulator_points": float(self._chunk_points),
             "foreground_points": float(self._foreground_points),
             "local_bytes": float(local_bytes + pending_bytes),
             "state_bytes": float(grid_bytes + local_bytes + pending_bytes),
