@@ -19,6 +19,7 @@ import signal
 import subprocess
 import sys
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     write_output(seq, root / "bag2", "rosbag2")
     write_output(seq, root / "b1.bag", "rosbag1")
     write_output(seq, root / "bagm", "rosbag2", storage="mcap")
+    write_output(seq, root / "custom.bag", "rosbag1", lidar_msg="CustomMsg")
     (root / "empty").mkdir()
     (root / "file.txt").write_text("not a folder\n")
 
@@ -216,6 +218,39 @@ def test_error_is_one_line_naming_the_culprit(
     assert culprit.format(**fill) in lines[0]
     assert "Traceback" not in err + out
     assert not list(tmp_path.glob(".*tmp*")), "temporary files left behind"
+
+
+@pytest.mark.parametrize("bag", ["b1.bag", "bag2", "bagm", "custom.bag"])
+def test_bit_flipped_bags_read_or_fail_cleanly(
+    files: Path, tmp_path: Path, bag: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """1-5 random bit flips anywhere in a bag (header, index, message data), 12 times
+    per format: ``info`` and ``convert`` either succeed or give the one-line error."""
+    rng = np.random.default_rng(zlib.crc32(bag.encode()))
+    copy = tmp_path / bag
+    (shutil.copytree if (files / bag).is_dir() else shutil.copy)(files / bag, copy)
+    target = copy if copy.is_file() else next(p for p in copy.iterdir() if p.suffix != ".yaml")
+    original = target.read_bytes()
+    outcomes = {0: 0, 2: 0}
+    for trial in range(12):
+        data = bytearray(original)
+        for _ in range(int(rng.integers(1, 6))):
+            data[int(rng.integers(0, len(data)))] ^= 1 << int(rng.integers(0, 8))
+        target.write_bytes(bytes(data))
+        out = tmp_path / f"out{trial}"
+        for argv in (["info", str(copy)], ["convert", str(copy), str(out), "--to", "mmaud"]):
+            code, _, err = _run_in_process(argv + (["--quiet"] if argv[0] == "convert" else []))
+            assert code in (0, 2), err
+            if code == 2:
+                lines = err.strip().splitlines()
+                assert len(lines) == 1 and lines[0].startswith(f"clusterfilter {argv[0]}: error:")
+                assert "Traceback" not in err
+            outcomes[code] += 1
+    with capsys.disabled():
+        print(
+            f"\n[cli] {bag} with bit flips: {outcomes[0]} runs read it, "
+            f"{outcomes[2]} one-line errors"
+        )
 
 
 def test_every_command_has_error_cases(capsys: pytest.CaptureFixture[str]) -> None:
