@@ -309,7 +309,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "warmup",
         "float",
-        3.0,
+        5.0,
         "Streaming: no estimates during the first seconds of a stream (the persistence "
         "map is still empty).",
         minimum=0.0,
