@@ -1,0 +1,58 @@
+"""What the detector reports on drone-free simulated scenarios, by simulator class.
+
+For each report (offline and streaming) the simulator's labelled points within 3 m of it
+(prism offset removed) in frames within +-0.3 s are counted by class; the report is
+attributed to the majority class, or ``none`` when no point is that close.
+
+    .venv/bin/python benchmarks/detector_false_alarms.py --seeds 100 101 102
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from detector_accuracy import load_sim, run_case  # noqa: E402
+
+
+def main(argv=None) -> int:
+    from clusterfilter_ros.sim.raycast import CLASS_NAMES
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", nargs="+", default=["no_drone", "no_drone_birds"])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[100, 101, 102])
+    ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
+    args = ap.parse_args(argv)
+    total: collections.Counter = collections.Counter()
+    for scenario in args.scenarios:
+        for seed in args.seeds:
+            sim = load_sim(scenario, seed, args.cache)
+            frames = sim.sequence.frames
+            stamps = np.array([f.stamp for f in frames])
+            for mode in ("offline", "stream"):
+                _, pred, _ = run_case(sim, mode, {})
+                counts: collections.Counter = collections.Counter()
+                for t, p in zip(pred.stamps, pred.xyz, strict=True):
+                    votes = np.zeros(len(CLASS_NAMES) + 1)
+                    for i in np.nonzero(np.abs(stamps - t) <= 0.3)[0]:
+                        near = np.linalg.norm(frames[i].xyz - (p - sim.prism_offset), axis=1) < 3
+                        cls = sim.classes[i][near].astype(int)
+                        votes[: len(CLASS_NAMES)] += np.bincount(cls, minlength=len(CLASS_NAMES))
+                    name = CLASS_NAMES.get(int(votes.argmax()), "?") if votes.any() else "none"
+                    counts[name] += 1
+                total.update(counts)
+                print(f"{scenario} seed {seed} {mode}: {dict(counts)}")
+    n = sum(total.values())
+    shares = {k: f"{100 * v / n:.1f}%" for k, v in total.most_common()} if n else {}
+    print(f"all {n} reports: {shares}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
