@@ -46,6 +46,31 @@ def _dilate(static_keys: np.ndarray, dilation: int) -> np.ndarray:
     return np.unique((static_keys[:, None] + np.asarray(offs, dtype=np.int64)[None, :]).ravel())
 
 
+def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray:
+    """The static voxels that form small isolated groups (a hovering drone, not a building).
+
+    Static voxels are grouped by connected components of a grid twice as coarse (so
+    groups closer than about two voxels merge); groups whose bounding box is at most
+    ``hover_max_extent`` metres are returned (sorted keys).
+    """
+    if static_keys.size == 0:
+        return static_keys
+    centres = (voxel.unpack(static_keys) + 0.5) * params.static_voxel
+    coarse = voxel.voxel_keys(centres, 2.0 * params.static_voxel)
+    uc, inv = np.unique(coarse, return_inverse=True)
+    inv = inv.reshape(-1)
+    from clusterfilter_ros.core.clustering import voxel_clusters
+
+    comp = voxel_clusters(uc, np.ones(uc.size), 0.0)[inv]
+    k = int(comp.max()) + 1
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, comp, centres - params.static_voxel / 2)
+    np.maximum.at(hi, comp, centres + params.static_voxel / 2)
+    small = (hi - lo).max(axis=1) <= params.hover_max_extent + 1e-9
+    return static_keys[small[comp]]
+
+
 def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
     """(N,) bool: points in voxels occupied in >= static_min_bins time bins of the sequence."""
     xyz = np.asarray(xyz).reshape(-1, 3)
@@ -59,6 +84,8 @@ def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.
     pairs = np.unique(kinv * n_bins + bins)
     bins_per_voxel = np.bincount(pairs // n_bins, minlength=ukeys.size)
     static_keys = ukeys[bins_per_voxel >= params.static_min_bins]
+    if params.hover_detection:
+        static_keys = np.setdiff1d(static_keys, compact_static_keys(static_keys, params))
     static_keys = _dilate(static_keys, params.static_dilation)
     return voxel.lookup(static_keys, keys) >= 0
 
@@ -126,6 +153,8 @@ class BackgroundGrid:
     def static_keys(self) -> np.ndarray:
         """Sorted keys of the voxels currently considered static (dilated as configured)."""
         static = self.keys[_popcount(self.masks) >= self.params.static_min_bins]
+        if self.params.hover_detection:
+            static = np.setdiff1d(static, compact_static_keys(static, self.params))
         return _dilate(static, self.params.static_dilation)
 
     @property

@@ -307,6 +307,29 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1,
     ),
     ParamSpec(
+        "hover_detection",
+        "bool",
+        True,
+        "Keep small isolated groups of static voxels (at most hover_max_extent) and accept "
+        "compact clusters seen in >= hover_min_frames frames without motion: hovering drones.",
+    ),
+    ParamSpec(
+        "hover_max_extent",
+        "float",
+        3.0,
+        "Largest bounding-box side (m) of a hovering-drone candidate.",
+        minimum=0.1,
+        maximum=50.0,
+    ),
+    ParamSpec(
+        "hover_min_frames",
+        "int",
+        20,
+        "Frames with points a compact motionless cluster needs to count as a hovering drone.",
+        minimum=1,
+        maximum=100000,
+    ),
+    ParamSpec(
         "warmup",
         "float",
         5.0,

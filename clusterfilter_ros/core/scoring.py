@@ -270,9 +270,15 @@ def score_clusters(
         span = np.maximum(res.t_last - res.t_first, fp)
         res.apparent_speed = np.where(counts > 0, res.extent / span, 0.0)
         moving = np.clip(res.apparent_speed / float(params.min_speed), 0.0, 1.0)
-        res.normalized_score = (
-            coherent * moving * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
-        )
+        motion = coherent * moving
+        if params.hover_detection:
+            # A compact object seen in many frames: a hovering drone (static structure
+            # has been suppressed, except compact isolated groups; see background.py).
+            hovering = (res.extent <= params.hover_max_extent) & (
+                res.support_frames >= params.hover_min_frames
+            )
+            motion = np.where(hovering, 1.0, motion)
+        res.normalized_score = motion * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
         support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
     res.candidate = (

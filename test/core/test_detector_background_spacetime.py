@@ -32,7 +32,9 @@ def test_offline_persistence_masks_the_wall_not_the_drone():
 
 
 def test_background_grid_learns_and_forgets():
-    params = detector_params({"global_window": 5.0, "static_bin": 1.0, "static_min_bins": 3})
+    params = detector_params(
+        {"global_window": 5.0, "static_bin": 1.0, "static_min_bins": 3, "hover_detection": False}
+    )
     grid = BackgroundGrid(params)
     wall_key = voxel.voxel_keys(np.array([[30.0, 0.0, 5.0]]), params.static_voxel)
     for second in range(4):
@@ -74,3 +76,36 @@ def test_motion_coherence_moving_vs_static():
     # A cluster seen in one window only carries no motion evidence.
     one = motion_coherence(np.zeros(5, int), rng.normal(size=(5, 3)), np.zeros(5), 1, 1.0)
     assert one[0] == 0.0
+
+
+def test_compact_static_group_is_kept_for_hover_detection():
+    from clusterfilter_ros.core.background import compact_static_keys
+
+    params = detector_params()
+    wall = voxel.voxel_keys(
+        np.array([[30.0, y, z] for y in np.arange(-10, 10, 1.5) for z in np.arange(2, 12, 1.5)]),
+        params.static_voxel,
+    )
+    drone = voxel.voxel_keys(np.array([[0.0, 0.0, 20.0], [0.8, 0.0, 20.0]]), params.static_voxel)
+    keys = np.unique(np.concatenate([wall, drone]))
+    kept = compact_static_keys(keys, params)
+    assert set(kept.tolist()) == set(np.unique(drone).tolist())
+
+
+def test_hovering_object_detected_offline_only_with_hover_detection():
+    from clusterfilter_ros.core.frame import MID360, Frame
+    from clusterfilter_ros.core.offline import detect_offline
+
+    rng = np.random.default_rng(4)
+    frames = []
+    for i in range(150):
+        wall = np.column_stack([np.full(60, 30.0), rng.uniform(-5, 5, 60), rng.uniform(3, 9, 60)])
+        parts = [wall]
+        if i % 2 == 0:  # one return every other frame, drifting 0.3 m around a point
+            parts.append(np.array([[5.0, 5.0, 18.0]]) + rng.normal(0, 0.15, (1, 3)))
+        frames.append(Frame(i * 0.1, MID360, np.vstack(parts).astype(np.float32)))
+    found = detect_offline(frames)
+    assert len(found.estimates) > 100
+    assert np.allclose(np.median(found.estimates.xyz, axis=0), [5, 5, 18], atol=0.3)
+    missed = detect_offline(frames, detector_params({"hover_detection": False}))
+    assert len(missed.estimates) == 0
