@@ -127,3 +127,48 @@ def relabel_compact(labels: np.ndarray) -> tuple[np.ndarray, int]:
     out = np.full(labels.shape, -1, dtype=np.int64)
     out[valid] = inv.reshape(-1)
     return out, int(uniq.size)
+
+
+def merge_colocated_compact(
+    labels: np.ndarray, xyz: np.ndarray, max_extent: float
+) -> tuple[np.ndarray, int]:
+    """Merge clusters that are each compact (bounding box <= ``max_extent``) and lie at
+    the same place (centroids in touching ``max_extent`` voxels).
+
+    Space-time clustering cuts a hovering drone seen once a second into many short
+    clusters at one spot; this joins them again. Returns compact labels and their count.
+    """
+    labels, k = relabel_compact(labels)
+    if k < 2:
+        return labels, k
+    keep = labels >= 0
+    lab = labels[keep]
+    pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[keep]
+    counts = np.bincount(lab, minlength=k).astype(np.float64)
+    centroid = np.stack([np.bincount(lab, weights=pts[:, a], minlength=k) for a in range(3)], 1)
+    centroid /= counts[:, None]
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, lab, pts)
+    np.maximum.at(hi, lab, pts)
+    compact = np.nonzero((hi - lo).max(axis=1) <= max_extent)[0]
+    if compact.size < 2:
+        return labels, k
+    keys = voxel.voxel_keys(centroid[compact], max_extent)
+    uk, inv = np.unique(keys, return_inverse=True)
+    group = voxel_clusters(uk, np.ones(uk.size), 0.0)[inv.reshape(-1)]
+    n_groups = int(group.max()) + 1
+    g_lo = np.full((n_groups, 3), np.inf)
+    g_hi = np.full((n_groups, 3), -np.inf)
+    np.minimum.at(g_lo, group, lo[compact])
+    np.maximum.at(g_hi, group, hi[compact])
+    small = (g_hi - g_lo).max(axis=1) <= max_extent  # the union must stay compact too
+    target = np.arange(k)
+    # Every compact cluster of a small group takes the group's smallest label.
+    first = np.full(n_groups, k)
+    np.minimum.at(first, group, compact)
+    merge = small[group]
+    target[compact[merge]] = first[group[merge]]
+    out = labels.copy()
+    out[keep] = target[lab]
+    return relabel_compact(out)

@@ -21,6 +21,7 @@ from clusterfilter_ros.core.background import static_mask_offline
 from clusterfilter_ros.core.clustering import (
     dbscan_points,
     density_mask,
+    merge_colocated_compact,
     relabel_compact,
     spacetime_cluster_points,
     voxel_cluster_points,
@@ -106,6 +107,8 @@ def detect_offline(
         moving = ~static_mask_offline(xyz, t, params)
         xyz, t = xyz[moving], t[moving]
     labels, k = relabel_compact(cluster_labels(xyz, t, params))
+    if params.hover_detection:
+        labels, k = merge_colocated_compact(labels, xyz, params.hover_max_extent)
     scores = score_clusters(labels, xyz, t, params, n_clusters=k)
     selected = select_clusters(scores, params)
     rows = scores.rows()

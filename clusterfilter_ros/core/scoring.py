@@ -271,14 +271,18 @@ def score_clusters(
         res.apparent_speed = np.where(counts > 0, res.extent / span, 0.0)
         moving = np.clip(res.apparent_speed / float(params.min_speed), 0.0, 1.0)
         motion = coherent * moving
+        hovering = np.zeros(k, dtype=bool)
         if params.hover_detection:
             # A compact object seen in many frames: a hovering drone (static structure
             # has been suppressed, except compact isolated groups; see background.py).
             hovering = (res.extent <= params.hover_max_extent) & (
                 res.support_frames >= params.hover_min_frames
             )
-            motion = np.where(hovering, 1.0, motion)
         res.normalized_score = motion * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
+        if params.hover_detection:
+            # Staying in place is what lowers R and raises IoU, so a hovering candidate
+            # is scored by its compactness and support alone.
+            res.normalized_score = np.where(hovering, 1.0, res.normalized_score)
         support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
     res.candidate = (

@@ -32,7 +32,7 @@ import numpy as np
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid
-from clusterfilter_ros.core.clustering import relabel_compact
+from clusterfilter_ros.core.clustering import merge_colocated_compact, relabel_compact
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import Frame
 from clusterfilter_ros.core.offline import cluster_labels
@@ -224,6 +224,8 @@ class StreamingDetector:
             t = np.concatenate([c.t for c in self._chunks])
             self._foreground_points = int(t.size)
             labels, k = relabel_compact(cluster_labels(xyz, t, p))
+            if p.hover_detection:
+                labels, k = merge_colocated_compact(labels, xyz, p.hover_max_extent)
             self._clusters = k
             if k:
                 # Windows aligned to the stream's first stamp (deterministic), unless the

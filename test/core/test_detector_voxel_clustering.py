@@ -94,3 +94,19 @@ def test_density_mask_drops_isolated_noise_keeps_consistent_track():
 def test_relabel_compact():
     labels, k = relabel_compact(np.array([5, -1, 5, 9, 2]))
     assert k == 3 and labels.tolist() == [1, -1, 1, 2, 0]
+
+
+def test_merge_colocated_compact_joins_pieces_at_one_spot_only():
+    from clusterfilter_ros.core.clustering import merge_colocated_compact
+
+    rng = np.random.default_rng(5)
+    hover_a = rng.normal([0, 0, 20], 0.2, (6, 3))  # two pieces of a hover, same spot
+    hover_b = rng.normal([0, 0, 20], 0.2, (6, 3))
+    far = rng.normal([30, 0, 20], 0.2, (6, 3))  # compact, elsewhere
+    wide = np.column_stack([np.linspace(-20, -5, 6), np.zeros(6), np.full(6, 20.0)])
+    xyz = np.vstack([hover_a, hover_b, far, wide])
+    labels = np.repeat([0, 1, 2, 3], 6)
+    merged, k = merge_colocated_compact(labels, xyz, 3.0)
+    assert k == 3
+    assert len(set(merged[:12].tolist())) == 1
+    assert len({merged[0], merged[12], merged[18]}) == 3
