@@ -99,18 +99,26 @@ def _continue(
 
 
 def default_flight(rng: np.random.Generator, duration: float, size: float) -> list[Waypoint]:
-    """Arrives from ~55 m, slows to a 5 s hover at ~25 m, leaves across to ~45 m."""
+    """Arrives from ~40 m, hovers 4 s at ~13 m range, climbs over the rig through the
+    Avia's cone at ~25 m up, and leaves on the far side towards ~35 m."""
     pts = _rotated(
         rng,
-        [(48.0, 26.0, 12.0), (30.0, 12.0, 14.0), (24.0, 9.0, 15.0), (-5.0, 33.0, 19.0)],
+        [
+            (36.0, 18.0, 16.0),
+            (12.0, 6.0, 10.0),
+            (10.0, 7.0, 11.0),
+            (1.0, -2.0, 24.0),
+            (-18.0, -14.0, 20.0),
+        ],
         40.0,
     )
     plan = [
         Waypoint(pts[0]),
-        Waypoint(pts[1], speed=4.5),
-        Waypoint(pts[2], hold=5.0, speed=3.0),
-        Waypoint(pts[3], speed=6.0),
-        Waypoint((pts[3][0] - 25.0, pts[3][1] + 8.0, 22.0), speed=6.0),
+        Waypoint(pts[1], speed=5.0),
+        Waypoint(pts[2], hold=4.0, speed=1.5),
+        Waypoint(pts[3], speed=5.0),
+        Waypoint(pts[4], speed=6.0),
+        Waypoint((pts[4][0] - 12.0, pts[4][1] - 8.0, 16.0), speed=6.0),
     ]
     return _continue(rng, plan, duration)
 

@@ -90,9 +90,10 @@ def _scenarios() -> dict[str, ScenarioSpec]:
     specs = [
         ScenarioSpec(
             "default",
-            "drone arrives, hovers at ~25 m, leaves; car park with people, a car, trees",
+            "drone arrives, hovers at ~13 m, climbs over the rig (Avia cone), leaves; "
+            "car park with people, a car, trees",
             20.0,
-            "mavic2",
+            "phantom4",
             flights.default_flight,
             lead_time=2.0,
         ),
