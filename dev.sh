@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set-up and entry points for a fresh Debian/Ubuntu machine with Python 3.10+ and no ROS.
 #   ./dev.sh demo   create .venv, install pinned dependencies, run the end-to-end demo
+#                   (outputs in demo_out/; extra arguments go to `clusterfilter demo`)
 #   ./dev.sh test   create .venv, install pinned dependencies, lint and run the tests
 #   ./dev.sh install   only the set-up
 # Environment: PYTHON (default python3), VENV (default .venv next to this script).
@@ -53,7 +54,7 @@ case "$cmd" in
     ;;
   demo)
     install
-    exec "$VENV/bin/clusterfilter" demo "$@"
+    exec "$VENV/bin/clusterfilter" demo --out "$here/demo_out" "$@"
     ;;
   test)
     install

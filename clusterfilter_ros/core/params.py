@@ -189,9 +189,10 @@ def markdown_table(specs: Iterable[ParamSpec]) -> str:
     """A Markdown table of parameters for the README."""
     rows = ["| name | type | default | range | description |", "|---|---|---|---|---|"]
     for s in specs:
-        rows.append(
-            f"| `{s.name}` | {s.kind} | `{s.default}` | {s.range_text()} | {s.description} |"
-        )
+        cells = [f"`{s.name}`", s.kind, f"`{s.default}`", s.range_text(), s.description]
+        if s.read_only:
+            cells[-1] += " Read-only."
+        rows.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(rows)
 
 
