@@ -521,6 +521,35 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "residual_window",
+        "float",
+        2.0,
+        "Normalized scoring: seconds per window of the smoothness measure (a quadratic fit "
+        "of position against time per window; see smooth_residual).",
+        minimum=0.2,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "smooth_residual",
+        "float",
+        0.35,
+        "Normalized scoring: RMS 3D residual (m) of the per-window quadratic fit at or "
+        "below which a cluster keeps full confidence. Drones fly smooth paths (simulated "
+        "drone tracks 0.07-0.39 m, mostly body size and range noise); birds and swaying "
+        "branches are erratic (0.3-2.5 m).",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "max_residual",
+        "float",
+        0.7,
+        "Normalized scoring: quadratic-fit residual (m) at which the confidence reaches "
+        "zero (linear ramp from smooth_residual); 100 switches the smoothness factor off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "min_support_frames",
         "int",
         8,

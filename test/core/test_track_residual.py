@@ -1,0 +1,55 @@
+"""The smoothness feature: a quadratic fit's residual tells smooth tracks from erratic ones."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import score_clusters, track_residual
+
+
+def _track(erratic: bool, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """20 s at 10 Hz, 3 points per frame on a 0.3 m body; smooth turn or bird-like wobble."""
+    rng = np.random.default_rng(seed)
+    t = np.repeat(np.arange(0.0, 20.0, 0.1), 3)
+    centre = np.stack([5.0 * np.cos(0.2 * t), 5.0 * np.sin(0.2 * t), 10.0 + 0.1 * t], axis=1)
+    if erratic:  # sum of sinusoids, 1 m amplitude, periods 0.8-1.9 s (simulated birds)
+        for period, phase in ((0.8, 0.3), (1.3, 1.9), (1.9, 4.0)):
+            centre += 0.5 * np.sin(2 * np.pi * t[:, None] / period + phase + np.arange(3))
+    return t, centre + rng.normal(0.0, 0.1, size=centre.shape)
+
+
+def test_smooth_track_has_small_residual_and_erratic_large() -> None:
+    lab = np.zeros(600, dtype=np.int64)
+    t_s, p_s = _track(False)
+    t_e, p_e = _track(True)
+    smooth = track_residual(lab, p_s, t_s, 1, 2.0, 0.0)[0]
+    erratic = track_residual(lab, p_e, t_e, 1, 2.0, 0.0)[0]
+    assert 0.1 < smooth < 0.25  # the body/noise spread only
+    assert erratic > 0.5
+
+
+def test_sparse_cluster_without_a_full_window_has_no_evidence() -> None:
+    t = np.array([0.0, 0.1, 0.2])
+    p = np.array([[0.0, 0.0, 5.0], [1.0, 3.0, 5.0], [0.0, -2.0, 5.0]])
+    assert track_residual(np.zeros(3, np.int64), p, t, 1, 2.0, 0.0)[0] == 0.0
+    assert track_residual(
+        np.empty(0, np.int64), np.empty((0, 3)), np.empty(0), 2, 2.0, 0.0
+    ).shape == (2,)
+
+
+def test_erratic_cluster_loses_confidence_smooth_keeps_it() -> None:
+    t_s, p_s = _track(False)
+    t_e, p_e = _track(True, seed=1)
+    p_e[:, 0] += 40.0  # far apart
+    labels = np.repeat([0, 1], 600)
+    xyz = np.concatenate([p_s, p_e])
+    t = np.concatenate([t_s, t_e])
+    params = detector_params()
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    assert scores.residual[0] <= params.smooth_residual
+    assert scores.residual[1] >= params.max_residual
+    assert scores.confidence[1] == 0.0
+    off = score_clusters(labels, xyz, t, params.copy(max_residual=100.0), n_clusters=2)
+    assert off.confidence[1] > 0.0
+    assert np.isclose(off.confidence[0], scores.confidence[0])
