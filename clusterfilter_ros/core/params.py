@@ -609,6 +609,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         minimum=0.0,
         maximum=50.0,
     ),
+    ParamSpec(
+        "keep_confidence",
+        "float",
+        0.25,
+        "Streaming: a track being reported stays reported after a re-clustering while the "
+        "cluster continuing it (points within track_gate of its predicted position) has "
+        "at least this confidence, though below min_confidence (hysteresis); values >= "
+        "min_confidence switch this off.",
+        minimum=0.0,
+        maximum=1.0,
+    ),
     # --- streaming accumulator ---
     ParamSpec(
         "global_window",

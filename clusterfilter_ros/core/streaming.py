@@ -214,6 +214,7 @@ class StreamingDetector:
         self._static = self._background.static_keys()
         if p.static_suppression and self._static.size:
             self._drop_static_from_history()
+        previous = self._fit(self._now) if self._selected_conf >= p.min_confidence else None
         self._track.clear()
         self._selected_conf = 0.0
         self._clusters = 0
@@ -238,10 +239,35 @@ class StreamingDetector:
                     best = max(chosen[:3], key=lambda c: scores.t_last[c])
                     self._selected_conf = float(scores.confidence[best])
                     self._rebuild_track(labels == best, xyz, t)
+                elif previous is not None and p.keep_confidence < p.min_confidence:
+                    self._keep_track(previous[0], scores, labels, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
+
+    def _keep_track(
+        self,
+        predicted: np.ndarray,
+        scores: Any,
+        labels: np.ndarray,
+        xyz: np.ndarray,
+        t: np.ndarray,
+    ) -> None:
+        """Hysteresis: continue the reported track with the cluster that holds its recent
+        points, if that cluster passes the gates and has at least ``keep_confidence``."""
+        p = self.params
+        recent = (t >= self._now - p.track_window) & (labels >= 0)
+        near = recent & (
+            np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= p.track_gate**2
+        )
+        if not near.any():
+            return
+        c = int(np.bincount(labels[near]).argmax())
+        if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
+            # Reported at min_confidence: the track was confirmed, its evidence is weaker now.
+            self._selected_conf = float(p.min_confidence)
+            self._rebuild_track(labels == c, xyz, t)
 
     def _drop_static_from_history(self) -> None:
         """Remove points of voxels that have become static from the local history."""
