@@ -360,7 +360,8 @@ def track_residual(
     Time is cut into ``window``-second windows from ``t0``; in each (cluster, window)
     with at least :data:`RESIDUAL_MIN_POINTS` points spanning at least half the window,
     x, y and z are fitted by least squares as quadratics of time, and the RMS distance of
-    the points to the fit is taken. The result is the point-weighted mean over a
+    the points to the fit is taken (squares summed over n - 3 degrees of freedom, so few
+    points do not look smooth by overfitting). The result is the point-weighted mean over a
     cluster's windows, 0 for clusters without such a window (no evidence either way).
     An acceleration-limited drone leaves only its body size and range noise (simulation:
     0.07-0.39 m); an erratic bird or a swaying branch leaves much more.
@@ -407,7 +408,8 @@ def track_residual(
     coef = np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)  # (m, 3 powers, 3 axes)
     fitted = np.einsum("np,npa->na", powers, coef[inv])
     sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
-    rms = np.sqrt(np.bincount(inv, weights=sq, minlength=m) / n)
+    # Unbiased: the fit spends 3 degrees of freedom per axis.
+    rms = np.sqrt(np.bincount(inv, weights=sq, minlength=m) / np.maximum(n - 3.0, 1.0))
     cluster = cw_u // n_win
     weight = np.bincount(cluster[ok], weights=n[ok], minlength=k)
     total = np.bincount(cluster[ok], weights=(rms * n)[ok], minlength=k)
