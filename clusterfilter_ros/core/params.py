@@ -550,6 +550,25 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "smooth_excess",
+        "float",
+        0.25,
+        "Normalized scoring: excess residual (m; sqrt(residual^2 - spread^2), spread the "
+        "RMS scatter of a cluster's points within one frame) at or below which a cluster "
+        "keeps full confidence. Simulated drones 0-0.28 m; sparse birds 0.27-0.41 m.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "max_excess",
+        "float",
+        0.4,
+        "Normalized scoring: excess residual (m) at which the confidence reaches zero "
+        "(linear ramp from smooth_excess); 100 switches this factor off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "min_support_frames",
         "int",
         8,

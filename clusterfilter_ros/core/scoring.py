@@ -17,7 +17,9 @@ For every global cluster k:
   smoothness ramp (1 up to ``smooth_residual``, 0 at ``max_residual``) of the RMS residual
   of a quadratic fit of position against time per ``residual_window`` (see
   :func:`track_residual`): drones fly smooth, acceleration-limited paths, birds and
-  swaying branches do not.
+  swaying branches do not; and times a ramp (1 up to ``smooth_excess``, 0 at
+  ``max_excess``) of the excess residual sqrt(residual^2 - spread^2), spread being the
+  RMS scatter of a cluster's points within one frame (:func:`frame_spread`).
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ class ClusterScores:
     coherence: np.ndarray
     apparent_speed: np.ndarray
     residual: np.ndarray
+    excess_residual: np.ndarray
     paper_score: np.ndarray
     normalized_score: np.ndarray
     confidence: np.ndarray
@@ -97,6 +100,7 @@ def _empty(k: int) -> ClusterScores:
         coherence=z.copy(),
         apparent_speed=z.copy(),
         residual=z.copy(),
+        excess_residual=z.copy(),
         paper_score=z.copy(),
         normalized_score=z.copy(),
         confidence=z.copy(),
@@ -291,10 +295,19 @@ def score_clusters(
             # is scored by its compactness and support alone.
             res.normalized_score = np.where(hovering, 1.0, res.normalized_score)
         res.residual = track_residual(lab, pts, tt, k, float(params.residual_window), origin)
+        # The part of the residual not explained by the object's own spread in one frame
+        # (body size, range noise, motion within the frame): a sparse bird's few points
+        # per frame are tight but wander from any smooth path between frames.
+        spread = frame_spread(lab, pts, frame_bin, k)
+        res.excess_residual = np.sqrt(np.maximum(res.residual**2 - spread**2, 0.0))
         r_lo = float(params.smooth_residual)
         r_hi = max(float(params.max_residual), r_lo + 1e-6)
-        res.normalized_score = res.normalized_score * np.clip(
-            (r_hi - res.residual) / (r_hi - r_lo), 0.0, 1.0
+        e_lo = float(params.smooth_excess)
+        e_hi = max(float(params.max_excess), e_lo + 1e-6)
+        res.normalized_score = (
+            res.normalized_score
+            * np.clip((r_hi - res.residual) / (r_hi - r_lo), 0.0, 1.0)
+            * np.clip((e_hi - res.excess_residual) / (e_hi - e_lo), 0.0, 1.0)
         )
         support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
@@ -346,6 +359,24 @@ def motion_coherence(
     coh = 1.0 - local_sum / np.maximum(overall_sum, 1e-9)
     out[:] = np.where(multi_windows >= 2, np.clip(coh, 0.0, 1.0), 0.0)
     return out
+
+
+def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int) -> np.ndarray:
+    """Per cluster: RMS distance (m) of points to the mean of their frame bin.
+
+    Only (cluster, frame) pairs with at least 2 points count; 0 for clusters with none.
+    """
+    if lab.size == 0:
+        return np.zeros(k)
+    nb = int(frame_bin.max()) + 1
+    u, inv = np.unique(lab * nb + frame_bin, return_inverse=True)
+    inv = inv.reshape(-1)
+    n = np.bincount(inv).astype(np.float64)
+    c = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1) / n[:, None]
+    d2 = np.einsum("na,na->n", pts - c[inv], pts - c[inv])
+    m = n[inv] >= 2
+    cnt = np.bincount(lab[m], minlength=k)
+    return np.sqrt(np.bincount(lab[m], weights=d2[m], minlength=k) / np.maximum(cnt, 1))
 
 
 #: Fewest points for a residual window to count (a quadratic in 3 axes has 9 unknowns).

@@ -50,6 +50,28 @@ def test_erratic_cluster_loses_confidence_smooth_keeps_it() -> None:
     assert scores.residual[0] <= params.smooth_residual
     assert scores.residual[1] >= params.max_residual
     assert scores.confidence[1] == 0.0
-    off = score_clusters(labels, xyz, t, params.copy(max_residual=100.0), n_clusters=2)
+    off = score_clusters(
+        labels, xyz, t, params.copy(max_residual=100.0, max_excess=100.0), n_clusters=2
+    )
     assert off.confidence[1] > 0.0
     assert np.isclose(off.confidence[0], scores.confidence[0])
+
+
+def test_frame_spread_explains_body_size_not_wander() -> None:
+    """A dense smooth track's residual is its body spread (excess ~0); a sparse track
+    wandering 0.5 m off any smooth path with one point per frame has it all as excess."""
+    rng = np.random.default_rng(2)
+    t_s, p_s = _track(False)
+    t_w = np.arange(0.0, 20.0, 0.1)
+    p_w = np.stack([2.0 * t_w, np.zeros_like(t_w), np.full_like(t_w, 12.0)], axis=1)
+    p_w += rng.normal(0.0, 0.5 / np.sqrt(3.0), size=p_w.shape)  # 0.5 m RMS wander
+    p_w[:, 0] += 40.0
+    labels = np.concatenate([np.zeros(t_s.size, np.int64), np.ones(t_w.size, np.int64)])
+    params = detector_params()
+    scores = score_clusters(
+        labels, np.concatenate([p_s, p_w]), np.concatenate([t_s, t_w]), params, n_clusters=2
+    )
+    assert scores.excess_residual[0] < 0.1
+    assert scores.excess_residual[1] > params.max_excess
+    assert scores.confidence[1] == 0.0
+    assert scores.confidence[0] > 0.0
