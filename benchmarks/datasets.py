@@ -35,7 +35,7 @@ CACHE_DIR = Path(os.environ.get("CLUSTERFILTER_BENCH_CACHE", Path.home() / ".cac
 CACHE_DIR = CACHE_DIR / "clusterfilter_bench"
 
 
-def _sim_fingerprint() -> str:
+def sim_fingerprint() -> str:
     """Hash of the simulator's source files (cache key part)."""
     import clusterfilter_ros.sim as sim_pkg
 
@@ -50,7 +50,7 @@ def simulated(scenario: str, seed: int, duration: float) -> Any:
     """The simulator's ``SimulatedSequence`` for these arguments (cached on disk)."""
     from clusterfilter_ros.sim.scenarios import simulate
 
-    key = f"{scenario}-{seed}-{duration:g}-{_sim_fingerprint()}"
+    key = f"{scenario}-{seed}-{duration:g}-{sim_fingerprint()}"
     path = CACHE_DIR / f"{key}.pkl"
     if path.exists():
         try:

@@ -28,6 +28,9 @@ from clusterfilter_ros.core.offline import detect_offline
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.streaming import run_streaming
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from datasets import sim_fingerprint  # noqa: E402
+
 DEFAULT_SCENARIOS = [
     "default",
     "takeoff_landing",
@@ -42,10 +45,15 @@ DEFAULT_SCENARIOS = [
 
 
 def load_sim(scenario: str, seed: int, cache: Path | None, duration: float | None = None):
-    """The simulated recording (from the cache when present)."""
+    """The simulated recording (from the cache when present).
+
+    The cache key includes a hash of the simulator's source, so a changed simulator
+    never has its old recordings scored.
+    """
     from clusterfilter_ros.sim.scenarios import simulate
 
     key = f"{scenario}_s{seed}" + (f"_d{duration:g}" if duration else "")
+    key += f"_{sim_fingerprint()}"
     path = cache / f"{key}.pkl" if cache else None
     if path is not None and path.exists():
         with path.open("rb") as fh:
