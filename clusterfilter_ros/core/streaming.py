@@ -86,7 +86,7 @@ class StreamingDetector:
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
         self._chunks: deque[_Chunk] = deque()
         self._chunk_points = 0
-        self._denoise_recent: dict[str, deque[tuple[float, np.ndarray]]] = {}
+        self._denoise_recent: dict[str, voxel.SlidingVoxelCounts] = {}
         self._track: deque[_TrackSample] = deque()
         self._selected_conf = 0.0
         self._now = -math.inf
@@ -180,17 +180,15 @@ class StreamingDetector:
     def _denoise(self, sensor: str, stamp: float, xyz: np.ndarray) -> np.ndarray:
         """Keep points whose neighbourhood over the recent frames of this sensor is dense."""
         p = self.params
-        recent = self._denoise_recent.setdefault(sensor, deque())
+        recent = self._denoise_recent.setdefault(sensor, voxel.SlidingVoxelCounts())
         keys = voxel.voxel_keys(xyz, p.denoise_voxel)
-        while recent and recent[0][0] < self._now - p.denoise_window:
-            recent.popleft()
-        recent.append((stamp, keys))
+        recent.evict_before(self._now - p.denoise_window)
+        recent.add(stamp, keys)
         if xyz.shape[0] == 0:
             return np.zeros(0, bool)
-        all_keys = np.concatenate([k for _, k in recent])
-        uk, counts = np.unique(all_keys, return_counts=True)
-        density = voxel.neighbourhood_sums(uk, counts)
-        return density[np.searchsorted(uk, keys)] >= p.denoise_min_points
+        uk, inverse = np.unique(keys, return_inverse=True)
+        density = recent.neighbourhood_counts(uk)
+        return density[inverse.reshape(-1)] >= p.denoise_min_points
 
     def _evict_chunks(self) -> None:
         lo = self._now - self.params.local_history

@@ -7,6 +7,8 @@ and sorted key arrays can be searched with :func:`numpy.searchsorted`.
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 _BITS = 21
@@ -159,3 +161,59 @@ def lookup(sorted_keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
         return np.full(queries.shape, -1, dtype=np.int64)
     pos = np.minimum(np.searchsorted(sorted_keys, queries), n - 1)
     return np.where(sorted_keys[pos] == queries, pos, -1)
+
+
+class SlidingVoxelCounts:
+    """Point counts per voxel over a sliding window of frames, updated incrementally.
+
+    Holds one sorted array of (key, count) for the whole window plus each frame's own
+    unique keys and counts, so adding or evicting a frame is a merge of sorted runs
+    (O(window voxels)) instead of re-sorting every point of the window, and the 3x3x3
+    neighbourhood count is looked up only for the voxels being asked about.
+    """
+
+    def __init__(self) -> None:
+        self._frames: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+        self.keys = np.empty(0, np.int64)
+        self.counts = np.empty(0, np.int64)
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    def add(self, stamp: float, keys: np.ndarray) -> None:
+        """Add one frame's (unsorted, repeated) voxel keys."""
+        uk, cnt = np.unique(np.asarray(keys, dtype=np.int64), return_counts=True)
+        self._frames.append((float(stamp), uk, cnt))
+        if uk.size == 0:
+            return
+        merged = np.concatenate([self.keys, uk])
+        weights = np.concatenate([self.counts, cnt])
+        order = np.argsort(merged, kind="stable")  # two sorted runs: a linear merge
+        merged, weights = merged[order], weights[order]
+        starts = np.flatnonzero(np.r_[True, merged[1:] != merged[:-1]])
+        self.keys = merged[starts]
+        self.counts = np.add.reduceat(weights, starts)
+
+    def evict_before(self, stamp: float) -> None:
+        """Drop the frames stamped before ``stamp``."""
+        removed = False
+        while self._frames and self._frames[0][0] < stamp:
+            _, uk, cnt = self._frames.popleft()
+            if uk.size:
+                self.counts[np.searchsorted(self.keys, uk)] -= cnt  # keys unique per frame
+                removed = True
+        if removed:
+            keep = self.counts > 0
+            self.keys, self.counts = self.keys[keep], self.counts[keep]
+
+    def neighbourhood_counts(self, queries: np.ndarray) -> np.ndarray:
+        """Points in the 3x3x3 voxel neighbourhood of each query key (itself included)."""
+        queries = np.asarray(queries, dtype=np.int64)
+        total = np.zeros(queries.shape, np.int64)
+        if self.keys.size == 0 or queries.size == 0:
+            return total
+        offsets = [0] + [s * offset_key(off) for off in HALF_OFFSETS for s in (1, -1)]
+        for off in offsets:
+            idx = lookup(self.keys, queries + off)
+            total += np.where(idx >= 0, self.counts[np.maximum(idx, 0)], 0)
+        return total
