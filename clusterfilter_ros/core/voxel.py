@@ -163,6 +163,12 @@ def lookup(sorted_keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
     return np.where(sorted_keys[pos] == queries, pos, -1)
 
 
+#: Key differences of a voxel's 3x3x3 neighbourhood, itself first.
+_NEIGHBOURHOOD_KEYS = np.array(
+    [0] + [s * offset_key(off) for off in HALF_OFFSETS for s in (1, -1)], dtype=np.int64
+)
+
+
 class SlidingVoxelCounts:
     """Point counts per voxel over a sliding window of frames, updated incrementally.
 
@@ -212,8 +218,7 @@ class SlidingVoxelCounts:
         total = np.zeros(queries.shape, np.int64)
         if self.keys.size == 0 or queries.size == 0:
             return total
-        offsets = [0] + [s * offset_key(off) for off in HALF_OFFSETS for s in (1, -1)]
-        for off in offsets:
+        for off in _NEIGHBOURHOOD_KEYS:
             idx = lookup(self.keys, queries + off)
             total += np.where(idx >= 0, self.counts[np.maximum(idx, 0)], 0)
         return total
