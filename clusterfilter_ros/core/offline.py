@@ -4,8 +4,11 @@
    superimpose all of them into the global cloud.
 2. Denoise the points of ``denoise_sensors`` by density over the whole sequence, and
    (``static_suppression``) drop points in persistently occupied voxels.
-3. Cluster the global cloud (voxel connected components, or DBSCAN).
-4. Score every cluster from its local windows; gate; select the drone cluster(s).
+3. Cluster the global cloud (voxel connected components, or DBSCAN) and link the
+   fragments of one sparse moving object into one cluster (:mod:`~.linking`).
+4. Score every cluster from its local windows; gate; select the drone cluster(s); grow
+   each selected track at its ends by the noise points and small clusters it was
+   heading for.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
    (or given timestamps) inside the supported span.
 """
@@ -27,6 +30,7 @@ from clusterfilter_ros.core.clustering import (
     voxel_cluster_points,
 )
 from clusterfilter_ros.core.frame import Frame, TimedPositions
+from clusterfilter_ros.core.linking import extend_track, link_fragments
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
@@ -91,6 +95,37 @@ def cluster_labels(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarr
     return voxel_cluster_points(xyz, params.cluster_voxel, params.min_samples)
 
 
+def global_clusters(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> tuple[np.ndarray, int]:
+    """Compact cluster labels (0..K-1, -1 noise) and K: clustering, the merge of a hovering
+    drone's co-located pieces (``hover_detection``), then track linking (``link_max_gap``)."""
+    labels, k = relabel_compact(cluster_labels(xyz, t, params))
+    if params.hover_detection:
+        labels, k = merge_colocated_compact(labels, xyz, params.hover_max_extent)
+    if params.link_max_gap > 0:
+        labels, k = link_fragments(labels, xyz, t, params)
+    return labels, k
+
+
+def extend_selected(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    params: ParamSet,
+) -> np.ndarray:
+    """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
+    by noise points and clusters that do not qualify on their own."""
+    qualifies = scores.candidate & (scores.confidence >= params.min_confidence)
+    pool = (labels < 0) | ~qualifies[np.maximum(labels, 0)]
+    out = labels.copy()
+    for c in selected:
+        member = extend_track(out == c, xyz, t, pool, params)
+        pool &= ~member
+        out[member] = c
+    return out
+
+
 def detect_offline(
     frames: Iterable[Frame],
     params: ParamSet | None = None,
@@ -106,9 +141,7 @@ def detect_offline(
     if params.static_suppression and t.size:
         moving = ~static_mask_offline(xyz, t, params)
         xyz, t = xyz[moving], t[moving]
-    labels, k = relabel_compact(cluster_labels(xyz, t, params))
-    if params.hover_detection:
-        labels, k = merge_colocated_compact(labels, xyz, params.hover_max_extent)
+    labels, k = global_clusters(xyz, t, params)
     scores = score_clusters(labels, xyz, t, params, n_clusters=k)
     selected = select_clusters(scores, params)
     rows = scores.rows()
@@ -119,6 +152,8 @@ def detect_offline(
     )
     if not selected:
         return OfflineResult(empty, np.empty((0, 4)), None, rows, scores, selected)
+    if params.link_max_gap > 0:
+        labels = extend_selected(labels, xyz, t, scores, selected, params)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(

@@ -384,6 +384,51 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=3600.0,
     ),
     ParamSpec(
+        "link_max_gap",
+        "float",
+        2.0,
+        "Track linking: longest time gap (s) across which a cluster can continue an "
+        "earlier one (a sparse drone's fragments become one track); 0 = no linking.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "link_gate",
+        "float",
+        1.5,
+        "Track linking: distance (m) allowed between a fragment's start and the previous "
+        "fragment's end carried forward by its velocity, before the time-gap allowances.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "link_max_accel",
+        "float",
+        4.0,
+        "Track linking: acceleration (m/s^2) a linked object may have had during the gap; "
+        "the reach grows by link_max_accel * gap^2 / 2.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "link_max_speed",
+        "float",
+        15.0,
+        "Track linking: fastest speed (m/s) assumed for a fragment too short to have a "
+        "velocity; the reach grows by link_max_speed * gap, and never beyond that.",
+        minimum=0.0,
+        maximum=200.0,
+    ),
+    ParamSpec(
+        "link_fit_window",
+        "float",
+        1.0,
+        "Track linking: seconds at each end of a fragment fitted by a straight line to "
+        "give its start and end position and velocity.",
+        minimum=0.05,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "voxel_size",
         "float",
         0.2,
@@ -569,6 +614,34 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "accel_window",
+        "float",
+        1.0,
+        "Normalized scoring: seconds per window of the acceleration measure (a quadratic "
+        "fit of position against time per window; see smooth_accel).",
+        minimum=0.2,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "smooth_accel",
+        "float",
+        6.0,
+        "Normalized scoring: mean fitted acceleration (m/s^2) at or below which a cluster "
+        "keeps full confidence. Drones fly acceleration-limited paths (simulated: median "
+        "2.5, 90% below 5.2 over 1 s windows); birds weave (median 12).",
+        minimum=0.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
+        "max_accel",
+        "float",
+        12.0,
+        "Normalized scoring: mean fitted acceleration (m/s^2) at which the confidence "
+        "reaches zero (linear ramp from smooth_accel); 1000 switches the factor off.",
+        minimum=0.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
         "min_support_frames",
         "int",
         8,
@@ -700,6 +773,7 @@ PAPER_PRESET: dict[str, Any] = {
     "scoring": "paper",
     "static_suppression": False,
     "cluster_time": 0.0,
+    "link_max_gap": 0.0,
     "mid360_min_z": 3.5,
     "min_samples": 10,
     "cluster_voxel": 1.0,

@@ -8,6 +8,20 @@ from clusterfilter_ros.core.frame import MID360, Frame
 from clusterfilter_ros.core.params import ParamSet
 
 
+def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
+    """(N,) bool: the rows of ``frame.xyz`` that :func:`frame_points` keeps."""
+    xyz = frame.xyz
+    if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
+        return np.zeros(xyz.shape[0], dtype=bool)
+    keep = np.isfinite(xyz).all(axis=1)
+    keep &= (xyz != 0).any(axis=1)
+    r2 = np.einsum("ij,ij->i", xyz, xyz, dtype=np.float64)
+    keep &= r2 <= float(params.max_range) ** 2
+    if frame.sensor == MID360:
+        keep &= xyz[:, 2] > params.mid360_min_z
+    return keep
+
+
 def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray]:
     """The usable points of a frame: (xyz float32 (N, 3), per-point time float64 (N,)).
 
@@ -18,12 +32,7 @@ def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray
     xyz = frame.xyz
     if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
         return np.empty((0, 3), np.float32), np.empty(0, np.float64)
-    keep = np.isfinite(xyz).all(axis=1)
-    keep &= (xyz != 0).any(axis=1)
-    r2 = np.einsum("ij,ij->i", xyz, xyz, dtype=np.float64)
-    keep &= r2 <= float(params.max_range) ** 2
-    if frame.sensor == MID360:
-        keep &= xyz[:, 2] > params.mid360_min_z
+    keep = usable_mask(frame, params)
     pts = xyz[keep]
     if frame.point_time is not None:
         offs = frame.point_time[keep]

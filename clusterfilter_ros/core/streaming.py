@@ -32,10 +32,9 @@ import numpy as np
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid
-from clusterfilter_ros.core.clustering import merge_colocated_compact, relabel_compact
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import Frame
-from clusterfilter_ros.core.offline import cluster_labels
+from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
@@ -222,9 +221,7 @@ class StreamingDetector:
             xyz = np.concatenate([c.xyz for c in self._chunks])
             t = np.concatenate([c.t for c in self._chunks])
             self._foreground_points = int(t.size)
-            labels, k = relabel_compact(cluster_labels(xyz, t, p))
-            if p.hover_detection:
-                labels, k = merge_colocated_compact(labels, xyz, p.hover_max_extent)
+            labels, k = global_clusters(xyz, t, p)
             self._clusters = k
             if k:
                 # Windows aligned to the stream's first stamp (deterministic), unless the

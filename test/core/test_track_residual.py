@@ -51,7 +51,11 @@ def test_erratic_cluster_loses_confidence_smooth_keeps_it() -> None:
     assert scores.residual[1] >= params.max_residual
     assert scores.confidence[1] == 0.0
     off = score_clusters(
-        labels, xyz, t, params.copy(max_residual=100.0, max_excess=100.0), n_clusters=2
+        labels,
+        xyz,
+        t,
+        params.copy(max_residual=100.0, max_excess=100.0, max_accel=1000.0),
+        n_clusters=2,
     )
     assert off.confidence[1] > 0.0
     assert np.isclose(off.confidence[0], scores.confidence[0])

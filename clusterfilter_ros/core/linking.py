@@ -1,0 +1,264 @@
+"""Link the fragments of one moving object into one cluster (track linking).
+
+A small drone far from the lidars gives a few returns per frame and frames without any,
+and at 5-15 m/s it leaves the clusterer's neighbourhood between two returns; one flight
+then becomes dozens of clusters of 3-30 points, each too small and too short to be
+scored. Linking joins cluster B to cluster A when B starts shortly after A ends, where A
+was heading:
+
+- each cluster's *end state* (position and velocity at its last stamp) and *start state*
+  come from a weighted straight-line fit over its first / last ``link_fit_window``
+  seconds of per-frame mean positions; a fragment spanning less than two frames has no
+  velocity, only a position;
+- a pair (A, B) is a candidate when the gap ``dt = t_first(B) - t_last(A)`` is between
+  ``-frame_period`` and ``link_max_gap`` and the distance between B's start and A's
+  end carried forward by A's velocity (or A's end and B's start carried back by B's
+  velocity, whichever is smaller) is within ``link_gate + link_max_accel * dt^2 / 2``;
+  without either velocity the reach is ``link_gate + link_max_speed * dt`` instead;
+- candidates are taken greedily, best (smallest distance relative to the reach) first,
+  each cluster getting at most one successor and one predecessor, so a chain is one
+  object's track and never a tree of several objects.
+
+Only clusters that could be a small flying object take part: at most
+``max_cluster_points`` points, centroid above ``min_centroid_z``, and a mean extent per
+frame no larger than ``max_local_extent``. Walls, ground clutter and people are left
+alone, so a drone track can never be joined to them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.params import ParamSet
+
+#: Candidate pairs are formed in blocks of this many clusters (memory bound).
+_BLOCK = 512
+
+
+def _frame_samples(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, frame_period: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per (cluster, frame) mean: cluster id, time, position, point count, bbox side."""
+    fb = np.floor((t - t.min()) / frame_period + 1e-6).astype(np.int64)
+    nb = int(fb.max()) + 1
+    u, inv, n = np.unique(labels * nb + fb, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    n = n.astype(np.float64)
+    ts = np.bincount(inv, weights=t) / n
+    ps = np.stack([np.bincount(inv, weights=xyz[:, a]) for a in range(3)], axis=1) / n[:, None]
+    lo = np.full((u.size, 3), np.inf)
+    hi = np.full((u.size, 3), -np.inf)
+    np.minimum.at(lo, inv, xyz)
+    np.maximum.at(hi, inv, xyz)
+    return u // nb, ts, ps, n, (hi - lo).max(axis=1)
+
+
+def _line_fits(
+    cid: np.ndarray, ts: np.ndarray, ps: np.ndarray, w: np.ndarray, sel: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted line fit per cluster over the selected samples.
+
+    Returns (mean time (K,), mean position (K, 3), velocity (K, 3), has velocity (K,)).
+    """
+    c, tt, pp, ww = cid[sel], ts[sel], ps[sel], w[sel]
+    sw = np.bincount(c, weights=ww, minlength=k)
+    safe = np.maximum(sw, 1e-12)
+    tm = np.bincount(c, weights=ww * tt, minlength=k) / safe
+    pm = np.stack([np.bincount(c, weights=ww * pp[:, a], minlength=k) for a in range(3)], 1)
+    pm /= safe[:, None]
+    dt = tt - tm[c]
+    stt = np.bincount(c, weights=ww * dt * dt, minlength=k)
+    stp = np.stack(
+        [np.bincount(c, weights=ww * dt * (pp[:, a] - pm[c, a]), minlength=k) for a in range(3)],
+        axis=1,
+    )
+    n_samples = np.bincount(c, minlength=k)
+    t_lo = np.full(k, np.inf)
+    t_hi = np.full(k, -np.inf)
+    np.minimum.at(t_lo, c, tt)
+    np.maximum.at(t_hi, c, tt)
+    has_v = (n_samples >= 2) & (t_hi - t_lo > 0) & (stt > 0)
+    vel = np.where(has_v[:, None], stp / np.maximum(stt, 1e-12)[:, None], 0.0)
+    return tm, pm, vel, has_v
+
+
+def link_fragments(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+) -> tuple[np.ndarray, int]:
+    """Relabel so that linked fragments share one label; returns (labels, K).
+
+    ``labels`` must be compact (0..K-1, -1 noise). With ``link_max_gap`` 0 the labels
+    are returned unchanged.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    k = int(labels.max()) + 1 if labels.size else 0
+    gap = float(params.link_max_gap)
+    if k < 2 or gap <= 0:
+        return labels, k
+    keep = labels >= 0
+    lab = labels[keep]
+    pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[keep]
+    tt = np.asarray(t, dtype=np.float64)[keep]
+    fp = float(params.frame_period)
+    cid, ts, ps, w, side = _frame_samples(lab, pts, tt, k, fp)
+    counts = np.bincount(lab, minlength=k)
+    n_frames = np.bincount(cid, minlength=k)
+    mean_side = np.bincount(cid, weights=side, minlength=k) / np.maximum(n_frames, 1)
+    cz = np.bincount(lab, weights=pts[:, 2], minlength=k) / np.maximum(counts, 1)
+    eligible = (
+        (counts > 0)
+        & (counts <= params.max_cluster_points)
+        & (cz >= params.min_centroid_z)
+        & (mean_side <= params.max_local_extent)
+    )
+    if np.count_nonzero(eligible) < 2:
+        return labels, k
+    t_first = np.full(k, np.inf)
+    t_last = np.full(k, -np.inf)
+    np.minimum.at(t_first, cid, ts)
+    np.maximum.at(t_last, cid, ts)
+    win = float(params.link_fit_window)
+    tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, ts >= t_last[cid] - win, k)
+    tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, ts <= t_first[cid] + win, k)
+    end_pos = pm_e + v_e * (t_last - tm_e)[:, None]
+    start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
+    idx = np.nonzero(eligible)[0]
+    order = idx[np.argsort(t_first[idx], kind="stable")]
+    starts = t_first[order]
+    pairs_a, pairs_b, pairs_cost = [], [], []
+    for lo in range(0, idx.size, _BLOCK):
+        a = idx[lo : lo + _BLOCK]
+        # Successor candidates: clusters starting in [t_last(a) - fp, t_last(a) + gap].
+        first = np.searchsorted(starts, t_last[a] - fp, side="left")
+        last = np.searchsorted(starts, t_last[a] + gap, side="right")
+        width = int((last - first).max()) if a.size else 0
+        if width == 0:
+            continue
+        j = first[:, None] + np.arange(width)[None, :]
+        valid = j < last[:, None]
+        b = order[np.minimum(j, order.size - 1)]
+        aa = np.broadcast_to(a[:, None], b.shape)
+        valid &= b != aa
+        valid &= t_first[b] > t_first[aa]  # B must start after A started
+        dt = t_first[b] - t_last[aa]
+        adt = np.abs(dt)
+        fwd = np.linalg.norm(end_pos[aa] + v_e[aa] * dt[..., None] - start_pos[b], axis=-1)
+        back = np.linalg.norm(start_pos[b] - v_s[b] * dt[..., None] - end_pos[aa], axis=-1)
+        plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
+        known_a, known_b = has_e[aa], has_s[b]
+        dist = np.where(known_a, fwd, np.inf)
+        dist = np.minimum(dist, np.where(known_b, back, np.inf))
+        any_v = known_a | known_b
+        dist = np.where(any_v, dist, plain)
+        reach = np.minimum(
+            params.link_gate + 0.5 * params.link_max_accel * adt * adt,
+            params.link_gate + params.link_max_speed * adt,
+        )
+        # Two fragments without a velocity link only across one frame period: chains
+        # of single sparse returns (far structure, noise) would otherwise form.
+        valid &= any_v | (adt <= fp + 1e-6)
+        valid &= dist <= reach
+        pairs_a.append(aa[valid])
+        pairs_b.append(b[valid])
+        pairs_cost.append(dist[valid] / reach[valid])
+    if not pairs_a:
+        return labels, k
+    pa, pb, cost = (np.concatenate(x) for x in (pairs_a, pairs_b, pairs_cost))
+    if pa.size == 0:
+        return labels, k
+    succ = np.full(k, -1, dtype=np.int64)
+    pred = np.full(k, -1, dtype=np.int64)
+    for i in np.argsort(cost, kind="stable"):
+        a, b = int(pa[i]), int(pb[i])
+        if succ[a] < 0 and pred[b] < 0:
+            succ[a] = b
+            pred[b] = a
+    # Each chain takes the label of its head (a cluster without predecessor).
+    root = np.where(pred >= 0, pred, np.arange(k))
+    while True:  # pointer jumping: log2(longest chain) rounds
+        new = root[root]
+        if np.array_equal(new, root):
+            break
+        root = new
+    _, compact = np.unique(root, return_inverse=True)
+    out = labels.copy()
+    out[keep] = compact.reshape(-1)[lab]
+    return out, int(compact.max()) + 1
+
+
+def _end_state(
+    t: np.ndarray, xyz: np.ndarray, params: ParamSet, forward: bool
+) -> tuple[float, np.ndarray, np.ndarray | None]:
+    """(time, position, velocity or None) at the last (``forward``) or first point."""
+    fp = float(params.frame_period)
+    win = float(params.link_fit_window)
+    if forward:
+        edge = float(t.max())
+        sel = t >= edge - win
+    else:
+        edge = float(t.min())
+        sel = t <= edge + win
+    zeros = np.zeros(int(np.count_nonzero(sel)), dtype=np.int64)
+    cid, ts, ps, w, _ = _frame_samples(zeros, xyz[sel], t[sel], 1, fp)
+    tm, pm, vel, has_v = _line_fits(cid, ts, ps, w, np.ones(ts.size, bool), 1)
+    pos = pm[0] + vel[0] * (edge - tm[0])
+    return edge, pos, (vel[0] if has_v[0] else None)
+
+
+def extend_track(
+    member: np.ndarray, xyz: np.ndarray, t: np.ndarray, pool: np.ndarray, params: ParamSet
+) -> np.ndarray:
+    """Grow a selected track at both ends with points of ``pool`` where it was heading.
+
+    ``member`` (N,) bool marks the track's points, ``pool`` (N,) bool the points it may
+    take (noise and clusters too small to be scored alone). Step by step, the pool points
+    of the next frame beyond the track's end within the linking reach of its end state
+    (:func:`link_fragments`) join it and the end state is refitted; the same backwards
+    from its start. Returns the new member mask.
+    """
+    member = np.asarray(member, dtype=bool).copy()
+    pool = np.asarray(pool, dtype=bool) & ~member
+    gap = float(params.link_max_gap)
+    if gap <= 0 or not member.any() or not pool.any():
+        return member
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(t, dtype=np.float64)
+    fp = float(params.frame_period)
+    pool_idx = np.nonzero(pool)[0]
+    pool_idx = pool_idx[np.argsort(t[pool_idx], kind="stable")]
+    pool_t = t[pool_idx]
+    for forward in (True, False):
+        taken = np.zeros(pool_idx.size, dtype=bool)
+        while True:
+            m = np.nonzero(member)[0]
+            edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
+            if forward:
+                lo = np.searchsorted(pool_t, edge, side="right")
+                hi = np.searchsorted(pool_t, edge + gap, side="right")
+            else:
+                lo = np.searchsorted(pool_t, edge - gap, side="left")
+                hi = np.searchsorted(pool_t, edge, side="left")
+            cand = np.arange(lo, hi)
+            cand = cand[~taken[cand]]
+            if cand.size == 0:
+                break
+            dt = pool_t[cand] - edge
+            adt = np.abs(dt)
+            if vel is None:
+                pred = np.broadcast_to(pos, (cand.size, 3))
+                reach = np.where(adt <= fp + 1e-6, params.link_gate, -1.0)
+            else:
+                pred = pos + dt[:, None] * vel
+                reach = np.minimum(
+                    params.link_gate + 0.5 * params.link_max_accel * adt * adt,
+                    params.link_gate + params.link_max_speed * adt,
+                )
+            ok = np.linalg.norm(xyz[pool_idx[cand]] - pred, axis=1) <= reach
+            if not ok.any():
+                break
+            # The nearest frame in time among the reachable points joins the track.
+            near_t = adt[ok].min()
+            join = cand[ok & (adt <= near_t + fp / 2)]
+            taken[join] = True
+            member[pool_idx[join]] = True
+    return member

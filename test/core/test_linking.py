@@ -1,0 +1,110 @@
+"""Track linking: fragments of one sparse moving object become one cluster."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.linking import extend_track, link_fragments
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import group_median, score_clusters
+
+
+def _fragments(rng, starts, length=0.4, speed=(8.0, 0.0, 0.0), origin=(0.0, 0.0, 20.0)):
+    """A constant-velocity object seen in bursts: one cluster label per burst."""
+    xyz, t, lab = [], [], []
+    for i, s in enumerate(starts):
+        for f in np.arange(s, s + length, 0.1):
+            p = np.asarray(origin) + f * np.asarray(speed)
+            xyz.append(p + rng.normal(0, 0.1, (4, 3)))
+            t.append(np.full(4, f))
+            lab.append(np.full(4, i))
+    return np.concatenate(xyz), np.concatenate(t), np.concatenate(lab).astype(np.int64)
+
+
+def test_bursts_of_one_moving_object_are_linked_into_one_cluster():
+    rng = np.random.default_rng(0)
+    xyz, t, lab = _fragments(rng, [0.0, 1.2, 2.3, 3.9])
+    out, k = link_fragments(lab, xyz, t, detector_params())
+    assert k == 1
+    assert (out == 0).all()
+
+
+def test_gap_longer_than_link_max_gap_is_not_bridged():
+    rng = np.random.default_rng(1)
+    xyz, t, lab = _fragments(rng, [0.0, 4.0])
+    out, k = link_fragments(lab, xyz, t, detector_params({"link_max_gap": 2.0}))
+    assert k == 2
+    off, k_off = link_fragments(lab, xyz, t, detector_params({"link_max_gap": 0.0}))
+    assert k_off == 2 and np.array_equal(off, lab)
+
+
+def test_fragment_off_the_predicted_path_is_not_linked():
+    rng = np.random.default_rng(2)
+    xyz, t, lab = _fragments(rng, [0.0])
+    # A second object 1 s later, 15 m to the side of where the first was heading.
+    other, t2, _ = _fragments(rng, [1.0], origin=(0.0, 15.0, 20.0))
+    out, k = link_fragments(
+        np.concatenate([lab, np.ones(t2.size, np.int64)]),
+        np.concatenate([xyz, other]),
+        np.concatenate([t, t2]),
+        detector_params(),
+    )
+    assert k == 2
+
+
+def test_single_returns_without_velocity_do_not_chain():
+    # Sparse returns of a static structure, one per frame, each its own fragment,
+    # separated by more than a frame: no velocity on either side, no link.
+    rng = np.random.default_rng(3)
+    t = np.arange(6) * 0.5
+    xyz = np.array([50.0, 10.0, 15.0]) + rng.normal(0, 1.0, (6, 3))
+    lab = np.arange(6, dtype=np.int64)
+    _, k = link_fragments(lab, xyz, t, detector_params())
+    assert k == 6
+
+
+def test_large_or_low_clusters_take_no_part():
+    rng = np.random.default_rng(4)
+    xyz, t, lab = _fragments(rng, [0.0, 1.0], origin=(0.0, 0.0, 0.5))  # below min_centroid_z
+    _, k = link_fragments(lab, xyz, t, detector_params())
+    assert k == 2
+
+
+def test_extend_track_takes_points_on_the_path_only():
+    rng = np.random.default_rng(5)
+    xyz, t, _ = _fragments(rng, [0.0], length=1.0)
+    member = np.ones(t.size, bool)
+    # Isolated returns ahead on the path (1.3 s, 1.6 s) and one far off it.
+    ahead_t = np.array([1.3, 1.6, 1.6])
+    ahead = np.array([[8.0 * 1.3, 0.0, 20.0], [8.0 * 1.6, 0.0, 20.0], [8.0 * 1.6, 12.0, 20.0]])
+    all_xyz = np.concatenate([xyz, ahead])
+    all_t = np.concatenate([t, ahead_t])
+    member = np.concatenate([member, np.zeros(3, bool)])
+    pool = ~member
+    out = extend_track(member, all_xyz, all_t, pool, detector_params())
+    assert out[-3] and out[-2]
+    assert not out[-1]
+
+
+def test_group_median():
+    g = np.array([0, 0, 0, 1, 1, 2])
+    v = np.array([5.0, 1.0, 3.0, 2.0, 4.0, 7.0])
+    assert np.allclose(group_median(g, v, 4), [3.0, 3.0, 7.0, 0.0])
+
+
+def test_weaving_track_loses_confidence_to_acceleration():
+    # Same straight flight, one with a 1.5 m, 1.2 s-period weave (a bird), dense points.
+    t = np.repeat(np.arange(0.0, 6.0, 0.1), 5)
+    base = np.stack([6.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], axis=1)
+    weave = base.copy()
+    weave[:, 1] += 1.5 * np.sin(2 * np.pi * t / 1.2)
+    rng = np.random.default_rng(6)
+    xyz = np.concatenate([base, weave + [0.0, 40.0, 0.0]]) + rng.normal(0, 0.05, (2 * t.size, 3))
+    tt = np.concatenate([t, t])
+    labels = np.repeat([0, 1], t.size)
+    params = detector_params({"max_residual": 100.0, "max_excess": 100.0})
+    scores = score_clusters(labels, xyz, tt, params, n_clusters=2)
+    assert scores.acceleration[0] < params.smooth_accel
+    assert scores.acceleration[1] > params.max_accel
+    assert scores.confidence[0] > 0.5
+    assert scores.confidence[1] == 0.0
