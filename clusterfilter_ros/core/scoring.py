@@ -411,6 +411,7 @@ def track_residual(
     t0: float,
     evidence: bool = False,
     acceleration: bool = False,
+    min_span: float | None = None,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Per cluster: RMS 3D residual (m) of a quadratic fit of position against time.
 
@@ -457,7 +458,8 @@ def track_residual(
     t_hi = np.full(m, -np.inf)
     np.minimum.at(t_lo, inv, rel)
     np.maximum.at(t_hi, inv, rel)
-    ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= 0.5 * window)
+    span_needed = 0.5 * window if min_span is None else float(min_span)
+    ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed)
     if not ok.any():
         return (out, none) if evidence else out
     gram[~ok] = np.eye(3)
@@ -512,7 +514,8 @@ def multiscale_residual(
 ) -> np.ndarray:
     """:func:`track_residual` at ``window``; clusters too sparse for any window there are
     measured with windows 2x and then 4x as long (a sparse track's few returns per
-    window say nothing alone; a quadratic over a longer span still bounds its wander).
+    window say nothing alone; a quadratic over a longer span still bounds its wander);
+    the points of a window must span half the base ``window`` at every scale.
     0 for clusters without evidence at any scale. ``acceleration``: see
     :func:`track_residual`."""
     out = np.zeros(k)
@@ -522,7 +525,7 @@ def multiscale_residual(
         if not sel.any():
             break
         r, has = track_residual(
-            lab[sel], pts[sel], t[sel], k, scale * window, t0, True, acceleration
+            lab[sel], pts[sel], t[sel], k, scale * window, t0, True, acceleration, 0.5 * window
         )
         take = todo & has
         out[take] = r[take]
