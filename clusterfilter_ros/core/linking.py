@@ -218,7 +218,8 @@ def extend_track(
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
-    gap = float(params.link_max_gap)
+    # A track grows across gaps the trajectory itself bridges (max_gap), not further.
+    gap = min(float(params.link_max_gap), float(params.max_gap))
     if gap <= 0 or not member.any() or not pool.any():
         return member
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
