@@ -653,7 +653,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_confidence",
         "float",
-        0.5,
+        0.6,
         "Clusters and estimates below this confidence are not reported.",
         minimum=0.0,
         maximum=1.0,
