@@ -333,9 +333,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "warmup",
         "float",
-        5.0,
-        "Streaming: no estimates during the first seconds of a stream (the persistence "
-        "map is still empty).",
+        3.0,
+        "Streaming: no estimates during the first seconds of a stream, while the "
+        "persistence map learns the scene (static_min_bins x static_bin seconds make a "
+        "voxel static).",
         minimum=0.0,
         maximum=600.0,
     ),
@@ -649,6 +650,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "distinct frames; fewer scale the confidence down.",
         minimum=1,
         maximum=100000,
+    ),
+    ParamSpec(
+        "min_track_seconds",
+        "float",
+        0.0,
+        "Normalized scoring: a cluster seen for less than this many seconds (first to last "
+        "point) has its confidence scaled by duration / min_track_seconds (track "
+        "confirmation); 0 = off.",
+        minimum=0.0,
+        maximum=600.0,
     ),
     ParamSpec(
         "min_confidence",

@@ -329,6 +329,11 @@ def score_clusters(
         a_hi = max(float(params.max_accel), a_lo + 1e-6)
         res.normalized_score *= np.clip((a_hi - res.acceleration) / (a_hi - a_lo), 0.0, 1.0)
         support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
+        if params.min_track_seconds > 0:
+            # Track confirmation: a track seen for less than min_track_seconds is scaled
+            # down in proportion (a bird's straight leg lasts seconds, a flight longer).
+            duration = np.where(counts > 0, res.t_last - res.t_first, 0.0)
+            support = support * np.clip(duration / float(params.min_track_seconds), 0.0, 1.0)
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
     res.candidate = (
         (res.n_points >= params.min_cluster_points)
@@ -459,7 +464,13 @@ def track_residual(
     np.minimum.at(t_lo, inv, rel)
     np.maximum.at(t_hi, inv, rel)
     span_needed = 0.5 * window if min_span is None else float(min_span)
-    ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed)
+    # Three distinct instants at least (0.05 s apart): points from two frames only fit a
+    # line exactly, and their quadratic term is unbounded.
+    instants = np.unique(
+        inv * (int(span * window / 0.05) + 2) + np.floor(rel / 0.05).astype(np.int64)
+    )
+    n_instants = np.bincount(instants // (int(span * window / 0.05) + 2), minlength=m)
+    ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed) & (n_instants >= 3)
     if not ok.any():
         return (out, none) if evidence else out
     gram[~ok] = np.eye(3)

@@ -290,24 +290,33 @@ class StreamingDetector:
             )
 
     def _fit(self, stamp: float) -> tuple[np.ndarray, int] | None:
-        """Position at ``stamp`` from the track's last track_window seconds."""
+        """Position at ``stamp`` from the track's last track_window seconds of samples
+        (ending at its newest sample). The newest sample may be at most
+        ``max_extrapolation`` old, or ``max_gap`` for a track slower than ``min_speed``
+        (a hovering drone seen once a second is where it was)."""
         p = self.params
-        samples = [s for s in self._track if stamp - p.track_window <= s.t <= stamp]
-        if not samples or stamp - samples[-1].t > p.max_extrapolation:
+        horizon = max(p.max_extrapolation, p.max_gap)
+        newest = [s.t for s in self._track if s.t <= stamp]
+        if not newest or stamp - max(newest) > horizon:
             return None
+        last = max(newest)
+        samples = [s for s in self._track if last - p.track_window <= s.t <= last]
         ts = np.array([s.t for s in samples])
         ps = np.array([s.position for s in samples])
         ws = np.array([float(s.points.shape[0]) for s in samples])
         n = int(ws.sum())
         mean = np.average(ps, axis=0, weights=ws)
+        slope = np.zeros(3)
+        tc = float(np.average(ts, weights=ws))
         if ts.size >= 3 and ts[-1] - ts[0] >= 2 * p.frame_period:
-            tc = float(np.average(ts, weights=ws))
             dt = ts - tc
             slope = (ws[:, None] * dt[:, None] * (ps - mean)).sum(axis=0) / float(
                 np.sum(ws * dt * dt)
             )
-            return mean + slope * (stamp - tc), n
-        return mean, n
+        slow = float(np.linalg.norm(slope)) < p.min_speed
+        if stamp - last > (horizon if slow else p.max_extrapolation):
+            return None
+        return mean + slope * (stamp - tc), n
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
         fit = self._fit(stamp)

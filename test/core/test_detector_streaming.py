@@ -111,3 +111,27 @@ def test_update_params_resets_only_when_needed(scene):
     assert det.params.static_voxel == 0.7  # a rejected update changes nothing
     det.reset()
     assert det.stats()["local_points"] == 0
+
+
+def _tracked(times, positions, **values):
+    """A detector whose track holds one 3-point sample per given time (confirmed)."""
+    from clusterfilter_ros.core.streaming import _TrackSample
+
+    det = StreamingDetector(detector_params(values))
+    for t, p in zip(times, positions, strict=True):
+        pts = np.repeat(np.asarray(p, np.float32)[None, :], 3, axis=0)
+        det._track.append(_TrackSample(float(t), np.asarray(p, np.float64), pts))
+    return det
+
+
+def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
+    times = np.arange(0.0, 2.0, 0.2)
+    hover = [(10.0 + 0.01 * t, 5.0, 20.0) for t in times]
+    fast = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
+    stamp = times[-1] + 0.8  # past max_extrapolation (0.5 s), within max_gap (1 s)
+    slow_fit = _tracked(times, hover)._fit(stamp)
+    assert slow_fit is not None
+    assert np.linalg.norm(slow_fit[0] - hover[-1]) < 0.1
+    assert _tracked(times, fast)._fit(stamp) is None
+    assert _tracked(times, fast)._fit(times[-1] + 0.3) is not None
+    assert _tracked(times, hover)._fit(times[-1] + 1.5) is None  # beyond max_gap

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters, track_residual
@@ -79,3 +80,26 @@ def test_frame_spread_explains_body_size_not_wander() -> None:
     assert scores.excess_residual[1] > params.max_excess
     assert scores.confidence[1] == 0.0
     assert scores.confidence[0] > 0.0
+
+
+def test_window_with_two_instants_gives_no_evidence():
+    # Six points at two instants 0.8 s apart: a quadratic is undetermined there, so the
+    # window says nothing (no enormous acceleration, no perfect-fit residual).
+    t = np.array([0.0, 0.0, 0.0, 0.8, 0.8, 0.8])
+    p = np.array([[0, 0, 20], [0.1, 0, 20], [0, 0.1, 20], [5, 0, 20], [5.1, 0, 20], [5, 0.1, 20]])
+    lab = np.zeros(6, np.int64)
+    r, has = track_residual(lab, p.astype(float), t, 1, 1.0, 0.0, evidence=True, acceleration=True)
+    assert not has[0] and r[0] == 0.0
+
+
+def test_min_track_seconds_scales_short_tracks():
+    t = np.repeat(np.arange(0.0, 2.0, 0.1), 3)
+    xyz = np.stack([5.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], axis=1)
+    xyz += np.random.default_rng(0).normal(0, 0.05, xyz.shape)
+    labels = np.zeros(t.size, np.int64)
+    base = score_clusters(labels, xyz, t, detector_params(), n_clusters=1)
+    short = score_clusters(
+        labels, xyz, t, detector_params({"min_track_seconds": 4.0}), n_clusters=1
+    )
+    assert base.confidence[0] > 0.1
+    assert short.confidence[0] == pytest.approx(base.confidence[0] * 1.9 / 4.0, rel=1e-6)
