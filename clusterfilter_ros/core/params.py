@@ -626,7 +626,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "smooth_accel",
         "float",
-        6.0,
+        4.0,
         "Normalized scoring: mean fitted acceleration (m/s^2) at or below which a cluster "
         "keeps full confidence. Drones fly acceleration-limited paths (simulated: median "
         "2.5, 90% below 5.2 over 1 s windows); birds weave (median 12).",
@@ -636,7 +636,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "max_accel",
         "float",
-        12.0,
+        8.0,
         "Normalized scoring: mean fitted acceleration (m/s^2) at which the confidence "
         "reaches zero (linear ramp from smooth_accel); 1000 switches the factor off.",
         minimum=0.0,

@@ -320,9 +320,14 @@ def score_clusters(
         r_hi = max(float(params.max_residual), r_lo + 1e-6)
         e_lo = float(params.smooth_excess)
         e_hi = max(float(params.max_excess), e_lo + 1e-6)
+        # The raw residual ramp applies to hovering candidates: there it bounds the size of
+        # what stays in place (a swaying tree crown scatters 0.7-0.9 m, a drone's body
+        # less). A moving drone close to the rig spreads its returns over its body just
+        # as much, and is judged by the excess over that spread alone.
+        raw = np.clip((r_hi - res.residual) / (r_hi - r_lo), 0.0, 1.0)
         res.normalized_score = (
             res.normalized_score
-            * np.clip((r_hi - res.residual) / (r_hi - r_lo), 0.0, 1.0)
+            * np.where(hovering, raw, 1.0)
             * np.clip((e_hi - res.excess_residual) / (e_hi - e_lo), 0.0, 1.0)
         )
         a_lo = float(params.smooth_accel)
