@@ -115,9 +115,11 @@ def extend_selected(
     params: ParamSet,
 ) -> np.ndarray:
     """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
-    by noise points and clusters that do not qualify on their own."""
-    qualifies = scores.candidate & (scores.confidence >= params.min_confidence)
-    pool = (labels < 0) | ~qualifies[np.maximum(labels, 0)]
+    by noise points and clusters too small to be scored (< ``min_cluster_points``)."""
+    # Only what is too small to be judged on its own: a cluster that was scored and
+    # rejected (an erratic bird, say) must not re-enter through a neighbouring track.
+    small = scores.n_points < params.min_cluster_points
+    pool = (labels < 0) | small[np.maximum(labels, 0)]
     out = labels.copy()
     for c in selected:
         member = extend_track(out == c, xyz, t, pool, params)
