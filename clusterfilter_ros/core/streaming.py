@@ -97,6 +97,7 @@ class StreamingDetector:
         self._last_push_ms = 0.0
         self._clusters = 0
         self._foreground_points = 0
+        self._jump_candidate: float | None = None
 
     def update_params(self, values: Mapping[str, Any]) -> None:
         """Validate and apply new values; the state is reset only if a voxel or filter
@@ -118,6 +119,19 @@ class StreamingDetector:
             self.frames_rejected += 1
             self._last_push_ms = (time.perf_counter() - start) * 1e3
             return None
+        if self._now > -math.inf and stamp > self._now + self.params.local_history:
+            # A jump forward by more than the history: one glitched stamp, or a clock that
+            # really moved. A second frame on the new timeline confirms the jump (the state
+            # restarts there); until then the frame is rejected, so a single garbage stamp
+            # cannot make every later, correct frame look old.
+            jump = self._jump_candidate
+            self._jump_candidate = stamp
+            if jump is None or abs(stamp - jump) > self.params.local_history:
+                self.frames_rejected += 1
+                self._last_push_ms = (time.perf_counter() - start) * 1e3
+                return None
+            self.reset()
+        self._jump_candidate = None
         if math.isnan(self._origin):
             self._origin = stamp
         xyz, t = frame_points(frame, self.params)

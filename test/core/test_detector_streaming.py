@@ -135,3 +135,35 @@ def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     assert _tracked(times, fast)._fit(stamp) is None
     assert _tracked(times, fast)._fit(times[-1] + 0.3) is not None
     assert _tracked(times, hover)._fit(times[-1] + 1.5) is None  # beyond max_gap
+
+
+def _restamped(frame: Frame, stamp: float) -> Frame:
+    return Frame(stamp, frame.sensor, frame.xyz, frame.intensity, frame.point_time)
+
+
+def test_one_far_future_stamp_is_rejected_and_the_stream_carries_on(scene):
+    frames, _, _ = scene(duration=10.0, wall_points=300)
+    half = len(frames) // 2
+    det = StreamingDetector()
+    first = [det.push(f) for f in frames[:half]]
+    assert det.push(_restamped(frames[half], 2e9)) is None
+    assert det.frames_rejected == 1
+    rest = [det.push(f) for f in frames[half + 1 :]]
+    assert det.frames_rejected == 1  # the later, correct frames are all accepted
+    assert sum(e is not None for e in rest) >= 0.9 * len(rest)
+    assert any(e is not None for e in first)
+
+
+def test_a_confirmed_clock_jump_restarts_the_state(scene):
+    frames, _, _ = scene(duration=10.0, wall_points=300)
+    half = len(frames) // 2
+    det = StreamingDetector()
+    for f in frames[:half]:
+        det.push(f)
+    jump = 5000.0
+    out = [det.push(_restamped(f, f.stamp + jump)) for f in frames[half:]]
+    assert det.frames_rejected == 1  # only the first frame of the new timeline
+    assert det.stats()["frames_pushed"] == len(frames)
+    # The state restarted on the new timeline: warm-up again, then estimates.
+    assert any(e is not None for e in out)
+    assert all(e is None or e.stamp >= frames[half].stamp + jump + det.params.warmup for e in out)
