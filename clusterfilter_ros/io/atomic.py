@@ -3,15 +3,19 @@
 Everything is first written to a temporary sibling (same directory, hence same file
 system) and then moved into place with :func:`os.replace` / :func:`os.rename`, which is
 atomic on POSIX. If writing fails, the temporary is removed and any previous file at the
-destination is left untouched.
+destination is left untouched. A temporary left by a killed writer (SIGKILL cannot be
+caught) is removed by the next successful write of the same output once it is an hour
+old.
 """
 
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -45,6 +49,30 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
+#: A temporary sibling older than this (s) was left by a writer that was killed.
+STALE_SECONDS = 3600.0
+
+
+def remove_stale_temporaries(target: Path, max_age: float = STALE_SECONDS) -> int:
+    """Delete temporary files ``.<name>.*.tmp*`` next to ``target`` older than ``max_age``
+    seconds (left behind when a writer was killed with SIGKILL); returns how many.
+
+    Younger ones may belong to a writer still running and are left alone; failures to
+    delete are ignored."""
+    now = time.time()
+    removed = 0
+    try:
+        candidates = list(target.parent.glob(f".{glob.escape(target.name)}.*.tmp*"))
+    except OSError:
+        return 0
+    for tmp in candidates:
+        with contextlib.suppress(OSError):
+            if tmp.is_file() and now - tmp.stat().st_mtime > max_age:
+                tmp.unlink()
+                removed += 1
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
     """Yield a temporary file path next to ``path``; on success move it onto ``path``.
@@ -74,6 +102,7 @@ def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterat
         try:
             yield tmp
             os.replace(tmp, target)
+            remove_stale_temporaries(target)
         except OSError as exc:  # disk full, quota, target became a folder, ...
             raise _output_error(target, exc) from exc
     except BaseException:
