@@ -15,9 +15,10 @@ was heading:
   end carried forward by A's velocity (or A's end and B's start carried back by B's
   velocity, whichever is smaller) is within ``link_gate + link_max_accel * dt^2 / 2``;
   without either velocity the reach is ``link_gate + link_max_speed * dt`` instead;
-- candidates are taken greedily, best (smallest distance relative to the reach) first,
-  each cluster getting at most one successor and one predecessor, so a chain is one
-  object's track and never a tree of several objects.
+- candidates are taken greedily, best first (distance relative to the reach plus gap
+  relative to ``link_max_gap``, so that the next fragment in time is not skipped), each
+  cluster getting at most one successor and one predecessor, so a chain is one object's
+  track and never a tree of several objects.
 
 Only clusters that could be a small flying object take part: at most
 ``max_cluster_points`` points, centroid above ``min_centroid_z``, and a mean extent per
@@ -31,8 +32,10 @@ import numpy as np
 
 from clusterfilter_ros.core.params import ParamSet
 
-#: Candidate pairs are formed in blocks of this many clusters (memory bound).
+#: Candidate pairs are formed in blocks of at most this many clusters and about this
+#: many (cluster, candidate) cells, which bounds the memory whatever the scene.
 _BLOCK = 512
+_BLOCK_CELLS = 1 << 18
 
 
 def _frame_samples(
@@ -125,14 +128,20 @@ def link_fragments(
     idx = np.nonzero(eligible)[0]
     order = idx[np.argsort(t_first[idx], kind="stable")]
     starts = t_first[order]
+    # Successor candidates of a: clusters starting in [t_last(a) - fp, t_last(a) + gap].
+    first_all = np.searchsorted(starts, t_last[idx] - fp, side="left")
+    last_all = np.searchsorted(starts, t_last[idx] + gap, side="right")
     pairs_a, pairs_b, pairs_cost = [], [], []
-    for lo in range(0, idx.size, _BLOCK):
-        a = idx[lo : lo + _BLOCK]
-        # Successor candidates: clusters starting in [t_last(a) - fp, t_last(a) + gap].
-        first = np.searchsorted(starts, t_last[a] - fp, side="left")
-        last = np.searchsorted(starts, t_last[a] + gap, side="right")
-        width = int((last - first).max()) if a.size else 0
-        if width == 0:
+    lo = 0
+    while lo < idx.size:
+        # Blocks of rows x candidate columns bounded to about _BLOCK_CELLS entries.
+        width = int((last_all[lo : lo + _BLOCK] - first_all[lo : lo + _BLOCK]).max())
+        rows = max(1, min(_BLOCK, _BLOCK_CELLS // max(width, 1)))
+        a = idx[lo : lo + rows]
+        first, last = first_all[lo : lo + rows], last_all[lo : lo + rows]
+        lo += rows
+        width = int((last - first).max())
+        if width <= 0:
             continue
         j = first[:, None] + np.arange(width)[None, :]
         valid = j < last[:, None]
@@ -160,7 +169,10 @@ def link_fragments(
         valid &= dist <= reach
         pairs_a.append(aa[valid])
         pairs_b.append(b[valid])
-        pairs_cost.append(dist[valid] / reach[valid])
+        # Distance relative to the reach, plus the gap relative to link_max_gap: the next
+        # fragment in time comes first (by distance alone, the reach growing with the gap
+        # would let A skip over B to C, leaving B alone).
+        pairs_cost.append(dist[valid] / reach[valid] + adt[valid] / gap)
     if not pairs_a:
         return labels, k
     pa, pb, cost = (np.concatenate(x) for x in (pairs_a, pairs_b, pairs_cost))

@@ -108,3 +108,19 @@ def test_weaving_track_loses_confidence_to_acceleration():
     assert scores.acceleration[1] > params.max_accel
     assert scores.confidence[0] > 0.5
     assert scores.confidence[1] == 0.0
+
+
+def test_block_size_does_not_change_the_links(monkeypatch):
+    import clusterfilter_ros.core.linking as linking
+
+    rng = np.random.default_rng(7)
+    parts = [_fragments(rng, [0.0, 1.0, 2.2], origin=(0.0, 5.0 * i, 20.0)) for i in range(6)]
+    xyz = np.concatenate([p[0] for p in parts])
+    t = np.concatenate([p[1] for p in parts])
+    lab = np.concatenate([p[2] + 3 * i for i, p in enumerate(parts)])
+    ref, k_ref = link_fragments(lab, xyz, t, detector_params())
+    monkeypatch.setattr(linking, "_BLOCK", 2)
+    monkeypatch.setattr(linking, "_BLOCK_CELLS", 3)
+    small, k_small = link_fragments(lab, xyz, t, detector_params())
+    assert k_ref == k_small == 6
+    assert np.array_equal(ref, small)
