@@ -226,6 +226,7 @@ class StreamingDetector:
         if p.static_suppression and self._static.size:
             self._drop_static_from_history()
         previous = self._fit(self._now) if self._selected_conf >= p.min_confidence else None
+        old_track = list(self._track)
         self._track.clear()
         self._selected_conf = 0.0
         self._clusters = 0
@@ -248,6 +249,8 @@ class StreamingDetector:
                     best = max(chosen[:3], key=lambda c: scores.t_last[c])
                     self._selected_conf = float(scores.confidence[best])
                     self._rebuild_track(labels == best, xyz, t)
+                    self._carry_over(old_track)
+                    self._catch_up()
                 elif previous is not None and p.keep_confidence < p.min_confidence:
                     self._keep_track(previous[0], scores, labels, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
@@ -277,6 +280,31 @@ class StreamingDetector:
             # Reported at min_confidence: the track was confirmed, its evidence is weaker now.
             self._selected_conf = float(p.min_confidence)
             self._rebuild_track(labels == c, xyz, t)
+
+    def _carry_over(self, old_track: list[_TrackSample]) -> None:
+        """Re-append samples the previous track had gathered between re-clusterings (gated
+        returns the clusterer may now call noise) beyond the rebuilt track's newest one,
+        each while it stays within ``track_gate`` of the rebuilt track's prediction."""
+        if not self._track:
+            return
+        gate2 = self.params.track_gate**2
+        for sample in old_track:
+            if sample.t <= self._track[-1].t:
+                continue
+            fit = self._fit(sample.t)
+            if fit is None or float(np.sum((sample.position - fit[0]) ** 2)) > gate2:
+                break
+            self._track.append(sample)
+
+    def _catch_up(self) -> None:
+        """Extend the rebuilt track through the history frames after its newest sample,
+        as :meth:`_extend_track` would have done had they arrived after this
+        re-clustering (a sparse drone's newest return is often a cluster of its own)."""
+        if not self._track:
+            return
+        for chunk in self._chunks:
+            if chunk.stamp > self._track[-1].t and chunk.xyz.shape[0]:
+                self._extend_track(chunk.stamp, chunk.xyz, chunk.t)
 
     def _drop_static_from_history(self) -> None:
         """Remove points of voxels that have become static from the local history."""
@@ -308,13 +336,29 @@ class StreamingDetector:
         (ending at its newest sample). The newest sample may be at most
         ``max_extrapolation`` old, or ``max_gap`` for a track slower than ``min_speed``
         (a hovering drone seen once a second is where it was)."""
+        pred = self._predict(stamp)
+        if pred is None:
+            return None
+        position, n, age, speed = pred
         p = self.params
-        horizon = max(p.max_extrapolation, p.max_gap)
+        limit = max(p.max_extrapolation, p.max_gap) if speed < p.min_speed else p.max_extrapolation
+        return (position, n) if age <= limit else None
+
+    def _predict(self, stamp: float) -> tuple[np.ndarray, int, float, float] | None:
+        """(position, points, age of the newest sample, speed) at ``stamp`` from a weighted
+        straight-line fit over the track's last track_window seconds of samples, or None
+        without a sample at or before ``stamp``."""
+        p = self.params
         newest = [s.t for s in self._track if s.t <= stamp]
-        if not newest or stamp - max(newest) > horizon:
+        if not newest:
             return None
         last = max(newest)
         samples = [s for s in self._track if last - p.track_window <= s.t <= last]
+        if len(samples) < 3:
+            # A sparse track: the last three samples (within link_max_gap), so that a
+            # return after a gap is not averaged with the one before it.
+            reach = last - max(p.track_window, p.link_max_gap)
+            samples = [s for s in self._track if reach <= s.t <= last][-3:]
         ts = np.array([s.t for s in samples])
         ps = np.array([s.position for s in samples])
         ws = np.array([float(s.points.shape[0]) for s in samples])
@@ -322,23 +366,27 @@ class StreamingDetector:
         mean = np.average(ps, axis=0, weights=ws)
         slope = np.zeros(3)
         tc = float(np.average(ts, weights=ws))
-        if ts.size >= 3 and ts[-1] - ts[0] >= 2 * p.frame_period:
+        if ts.size >= 2 and ts[-1] - ts[0] >= 2 * p.frame_period:
             dt = ts - tc
             slope = (ws[:, None] * dt[:, None] * (ps - mean)).sum(axis=0) / float(
                 np.sum(ws * dt * dt)
             )
-        slow = float(np.linalg.norm(slope)) < p.min_speed
-        if stamp - last > (horizon if slow else p.max_extrapolation):
-            return None
-        return mean + slope * (stamp - tc), n
+        return mean + slope * (stamp - tc), n, stamp - last, float(np.linalg.norm(slope))
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
-        fit = self._fit(stamp)
-        if fit is None:
+        """Append the frame's points within ``track_gate`` of the track's predicted
+        position. Association outlives reporting: a return up to ``max_gap`` after the
+        track's newest one continues it, although nothing was reported in between."""
+        p = self.params
+        pred = self._predict(stamp)
+        if pred is None:
             return
-        predicted, _ = fit
+        predicted, _, age, _ = pred
+        if age > max(p.max_extrapolation, p.max_gap):
+            return
+        gate = p.track_gate
         d2 = np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1)
-        near = d2 <= self.params.track_gate**2
+        near = d2 <= gate**2
         if near.any():
             group = xyz[near]
             self._track.append(

@@ -167,3 +167,21 @@ def test_a_confirmed_clock_jump_restarts_the_state(scene):
     # The state restarted on the new timeline: warm-up again, then estimates.
     assert any(e is not None for e in out)
     assert all(e is None or e.stamp >= frames[half].stamp + jump + det.params.warmup for e in out)
+
+
+def test_a_return_after_a_gap_is_associated_and_not_averaged_with_the_old_ones():
+    times = np.array([0.0, 0.1, 0.2, 0.3])
+    path = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
+    det = _tracked(times, path)
+    # The next return comes 0.7 s later (past max_extrapolation): it is still associated.
+    t_new = 1.0
+    new = np.array([[10.0 + 8.0 * t_new, 5.0, 20.0]], np.float32)
+    det._extend_track(t_new, new, np.array([t_new]))
+    assert len(det._track) == 5 and det._track[-1].t == t_new
+    # The estimate just after it follows the line through the last samples, not the mean
+    # of a sample 0.7 s old and the new one.
+    pos, _ = det._fit(1.05)
+    assert np.linalg.norm(pos - [10.0 + 8.0 * 1.05, 5.0, 20.0]) < 0.5
+    # A return far from the prediction is not associated.
+    det._extend_track(1.2, np.array([[30.0, 30.0, 20.0]], np.float32), np.array([1.2]))
+    assert det._track[-1].t == t_new
