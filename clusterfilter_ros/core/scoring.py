@@ -299,7 +299,16 @@ def score_clusters(
         if params.hover_detection:
             # A compact object seen in many frames: a hovering drone (static structure
             # has been suppressed, except compact isolated groups; see background.py).
-            hovering = (res.extent <= params.hover_max_extent) & (
+            # Extent between the 10th and 90th percentiles per axis: a few returns of a
+            # bird passing by must not stretch a hovering drone's cluster past the limit.
+            core_extent = np.max(
+                [
+                    group_quantile(lab, pts[:, a], k, 0.9) - group_quantile(lab, pts[:, a], k, 0.1)
+                    for a in range(3)
+                ],
+                axis=0,
+            )
+            hovering = (core_extent <= params.hover_max_extent) & (
                 res.support_frames >= params.hover_min_frames
             )
         res.normalized_score = motion * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
@@ -501,17 +510,25 @@ def track_residual(
 
 def group_median(groups: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
     """(K,) median of ``values`` per group id 0..K-1 (0 for empty groups)."""
+    return group_quantile(groups, values, k, 0.5)
+
+
+def group_quantile(groups: np.ndarray, values: np.ndarray, k: int, q: float) -> np.ndarray:
+    """(K,) ``q`` quantile (linear interpolation) of ``values`` per group id 0..K-1 (0 for
+    empty groups)."""
     out = np.zeros(k)
     if groups.size == 0:
         return out
     order = np.lexsort((values, groups))
-    g, v = groups[order], values[order]
+    g, v = groups[order], np.asarray(values, dtype=np.float64)[order]
     counts = np.bincount(g, minlength=k)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])
     has = counts > 0
-    lo = start + (counts - 1) // 2
-    hi = start + counts // 2
-    out[has] = 0.5 * (v[lo[has]] + v[hi[has]])
+    pos = start[has] + q * (counts[has] - 1)
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, start[has] + counts[has] - 1)
+    frac = pos - lo
+    out[has] = v[lo] * (1.0 - frac) + v[hi] * frac
     return out
 
 

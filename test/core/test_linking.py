@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core.linking import extend_track, link_fragments
 from clusterfilter_ros.core.params import detector_params
@@ -124,3 +125,34 @@ def test_block_size_does_not_change_the_links(monkeypatch):
     small, k_small = link_fragments(lab, xyz, t, detector_params())
     assert k_ref == k_small == 6
     assert np.array_equal(ref, small)
+
+
+def test_group_quantile_matches_numpy():
+    rng = np.random.default_rng(8)
+    g = rng.integers(0, 5, 200)
+    v = rng.normal(size=200)
+    from clusterfilter_ros.core.scoring import group_quantile
+
+    for q in (0.1, 0.5, 0.9):
+        got = group_quantile(g, v, 6, q)
+        for c in range(5):
+            assert got[c] == pytest.approx(np.quantile(v[g == c], q))
+        assert got[5] == 0.0
+
+
+def test_a_few_stray_returns_do_not_stop_a_hovering_cluster_from_counting_as_hovering():
+    rng = np.random.default_rng(9)
+    t = np.repeat(np.arange(0.0, 10.0, 0.2), 2)
+    xyz = np.array([5.0, 5.0, 15.0]) + rng.normal(0, 0.15, (t.size, 3))
+    # Four returns of something passing 4 m away join the cluster.
+    stray_t = np.array([3.0, 3.1, 3.2, 3.3])
+    stray = np.array([[9.0, 5.0, 15.0]] * 4)
+    all_xyz = np.concatenate([xyz, stray])
+    all_t = np.concatenate([t, stray_t])
+    labels = np.zeros(all_t.size, np.int64)
+    scores = score_clusters(labels, all_xyz, all_t, detector_params(), n_clusters=1)
+    assert scores.extent[0] > detector_params().hover_max_extent
+    # Scored as hovering (a still cluster gets nothing from the motion factors); the
+    # stray returns still cost it some smoothness.
+    assert scores.coherence[0] < detector_params().coherence_floor
+    assert scores.confidence[0] > 0.3
