@@ -654,10 +654,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_track_seconds",
         "float",
+        4.0,
+        "Offline: a cluster seen for less than this many seconds (first to last point) has "
+        "its confidence scaled by duration / min_track_seconds (track confirmation: a "
+        "bird's straight leg lasts a few seconds, a flight longer); 0 = off.",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
+        "stream_min_track_seconds",
+        "float",
         0.0,
-        "Normalized scoring: a cluster seen for less than this many seconds (first to last "
-        "point) has its confidence scaled by duration / min_track_seconds (track "
-        "confirmation); 0 = off.",
+        "Streaming: min_track_seconds for the clusters of the local history; every second "
+        "of it delays the first report of a new drone; 0 = off.",
         minimum=0.0,
         maximum=600.0,
     ),

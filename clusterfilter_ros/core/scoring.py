@@ -207,8 +207,13 @@ def score_clusters(
     global_points: np.ndarray | None = None,
     global_voxels: np.ndarray | None = None,
     t0: float | None = None,
+    min_track_seconds: float | None = None,
 ) -> ClusterScores:
     """Features, gates and scores of clusters ``0..n_clusters-1``.
+
+    ``min_track_seconds`` (default ``params.min_track_seconds``, the offline value)
+    scales the confidence of clusters seen for less than that many seconds; streaming
+    passes ``params.stream_min_track_seconds``.
 
     ``labels``/``xyz``/``t`` are the points the local windows are drawn from (label -1
     ignored). ``global_points``/``global_voxels`` give each cluster's global point count
@@ -343,11 +348,14 @@ def score_clusters(
         a_hi = max(float(params.max_accel), a_lo + 1e-6)
         res.normalized_score *= np.clip((a_hi - res.acceleration) / (a_hi - a_lo), 0.0, 1.0)
         support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
-        if params.min_track_seconds > 0:
-            # Track confirmation: a track seen for less than min_track_seconds is scaled
+        confirm = float(
+            params.min_track_seconds if min_track_seconds is None else min_track_seconds
+        )
+        if confirm > 0:
+            # Track confirmation: a track seen for less than `confirm` seconds is scaled
             # down in proportion (a bird's straight leg lasts seconds, a flight longer).
             duration = np.where(counts > 0, res.t_last - res.t_first, 0.0)
-            support = support * np.clip(duration / float(params.min_track_seconds), 0.0, 1.0)
+            support = support * np.clip(duration / confirm, 0.0, 1.0)
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
     res.candidate = (
         (res.n_points >= params.min_cluster_points)

@@ -242,7 +242,15 @@ class StreamingDetector:
                 # Windows aligned to the stream's first stamp (deterministic), unless the
                 # stream's clock jumped so far that the offsets would not fit an int64.
                 t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
-                scores = score_clusters(labels, xyz, t, p, n_clusters=k, t0=t0)
+                scores = score_clusters(
+                    labels,
+                    xyz,
+                    t,
+                    p,
+                    n_clusters=k,
+                    t0=t0,
+                    min_track_seconds=p.stream_min_track_seconds,
+                )
                 chosen = select_clusters(scores, p)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.

@@ -97,9 +97,13 @@ def test_min_track_seconds_scales_short_tracks():
     xyz = np.stack([5.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], axis=1)
     xyz += np.random.default_rng(0).normal(0, 0.05, xyz.shape)
     labels = np.zeros(t.size, np.int64)
-    base = score_clusters(labels, xyz, t, detector_params(), n_clusters=1)
+    off = detector_params({"min_track_seconds": 0.0})
+    base = score_clusters(labels, xyz, t, off, n_clusters=1)
     short = score_clusters(
         labels, xyz, t, detector_params({"min_track_seconds": 4.0}), n_clusters=1
     )
     assert base.confidence[0] > 0.1
     assert short.confidence[0] == pytest.approx(base.confidence[0] * 1.9 / 4.0, rel=1e-6)
+    # The streaming detector passes its own value.
+    stream = score_clusters(labels, xyz, t, off, n_clusters=1, min_track_seconds=2.0)
+    assert stream.confidence[0] == pytest.approx(base.confidence[0] * 1.9 / 2.0, rel=1e-6)
