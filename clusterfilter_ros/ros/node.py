@@ -223,6 +223,7 @@ class DetectorNode(Node):
         self._stopping = False
         self._processed = 0
         self._estimates = 0
+        self._last_estimate: tuple[float, float, int] | None = None  # stamp, confidence, points
         self._errors = 0
         self._last_error = ""
 
@@ -405,6 +406,11 @@ class DetectorNode(Node):
         self._pose_pub.publish(pose)
         with self._cond:
             self._estimates += 1
+            self._last_estimate = (
+                float(estimate.stamp),
+                float(estimate.confidence),
+                int(estimate.n_points),
+            )
             self._path.append(pose)
             path_poses = list(self._path) if self._path_pub.get_subscription_count() > 0 else None
         if path_poses is not None:
@@ -487,6 +493,7 @@ class DetectorNode(Node):
                 counts.released_by_timeout,
             )
             processed, estimates, errors = self._processed, self._estimates, self._errors
+            last_estimate = self._last_estimate
             last_error = self._last_error
             stale_timeout = self._values["stale_timeout"]
         with self._detector_lock:
@@ -556,6 +563,9 @@ class DetectorNode(Node):
             resets=merger_counts[2],
             released_without_other_lidar=merger_counts[3],
             detector_errors=errors,
+            last_estimate_stamp=-1.0 if last_estimate is None else last_estimate[0],
+            last_estimate_confidence=-1.0 if last_estimate is None else last_estimate[1],
+            last_estimate_points=-1 if last_estimate is None else last_estimate[2],
             **{f"detector_{k}": v for k, v in detector_stats.items()},
         )
         array.status = [det, *input_statuses]

@@ -167,6 +167,13 @@ def test_malformed_clouds_are_rejected_counted_and_survived(make_rig, small_sequ
     status = _statuses(rig.detector)
     assert status["avia input"][2]["rejected_malformed"] == str(len(MALFORMED))
     assert status["avia input"][0] == DiagnosticStatus.OK  # this period: all accepted
+    # The last pose's confidence and support, which a PoseStamped cannot carry.
+    values = status["detector"][2]
+    assert float(values["last_estimate_stamp"]) == expected[-1].stamp
+    assert float(values["last_estimate_confidence"]) == pytest.approx(
+        expected[-1].confidence, abs=1e-3
+    )
+    assert int(values["last_estimate_points"]) == expected[-1].n_points
 
 
 def test_repairable_clouds_are_decoded_exactly(make_rig, wait_for):
