@@ -156,3 +156,62 @@ def test_a_few_stray_returns_do_not_stop_a_hovering_cluster_from_counting_as_hov
     # stray returns still cost it some smoothness.
     assert scores.coherence[0] < detector_params().coherence_floor
     assert scores.confidence[0] > 0.3
+
+
+def test_sparse_cluster_is_measured_with_longer_windows():
+    from clusterfilter_ros.core.scoring import multiscale_residual, track_residual
+
+    # Three returns per 2 s window over 8 s: no 2 s window has the six points a quadratic
+    # fit needs, the longer windows do.
+    t = np.arange(0.0, 8.0, 0.66)
+    lab = np.zeros(t.size, np.int64)
+    rng = np.random.default_rng(10)
+    base = np.stack([5.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], axis=1)
+    smooth = base + rng.normal(0, 0.05, base.shape)
+    erratic = base.copy()
+    erratic[:, 1] += rng.normal(0, 1.0, t.size)
+    _, has = track_residual(lab, erratic, t, 1, 2.0, 0.0, evidence=True)
+    assert not has[0]
+    r_smooth = multiscale_residual(lab, smooth, t, 1, 2.0, 0.0)[0]
+    r_erratic = multiscale_residual(lab, erratic, t, 1, 2.0, 0.0)[0]
+    assert 0.0 < r_smooth < 0.15
+    assert r_erratic > 2.0 * r_smooth + 0.1
+
+
+def test_more_evidence_ranks_first_at_equal_confidence():
+    from clusterfilter_ros.core.scoring import select_clusters
+
+    rng = np.random.default_rng(11)
+    long_xyz, long_t, _ = _fragments(rng, [0.0], length=6.0)
+    short_xyz, short_t, _ = _fragments(rng, [2.0], length=1.0, origin=(0.0, 40.0, 20.0))
+    xyz = np.concatenate([long_xyz, short_xyz])
+    t = np.concatenate([long_t, short_t])
+    labels = np.concatenate([np.zeros(long_t.size, np.int64), np.ones(short_t.size, np.int64)])
+    params = detector_params({"min_track_seconds": 0.0})
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    scores.confidence[:] = 1.0  # equal confidence: evidence decides
+    order = np.argsort(-scores.rank_score("normalized"))
+    assert order[0] == 0
+    assert select_clusters(scores, params)[0] == 0
+
+
+def test_track_growth_does_not_take_a_scored_and_rejected_cluster():
+    from clusterfilter_ros.core.offline import extend_selected
+
+    rng = np.random.default_rng(12)
+    track_xyz, track_t, _ = _fragments(rng, [0.0], length=1.0)
+    # Right where the track is heading: a big cluster that was scored and rejected, and
+    # one lone return (noise).
+    big_t = np.repeat(np.arange(1.1, 1.9, 0.1), 4)
+    big = np.stack([8.0 * big_t, np.zeros_like(big_t), np.full_like(big_t, 20.0)], axis=1)
+    lone_t = np.array([1.05])
+    lone = np.array([[8.0 * 1.05, 0.0, 20.0]])
+    xyz = np.concatenate([track_xyz, big, lone])
+    t = np.concatenate([track_t, big_t, lone_t])
+    labels = np.concatenate([np.zeros(track_t.size, np.int64), np.ones(big_t.size, np.int64), [-1]])
+    params = detector_params()
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    scores.confidence[1] = 0.0  # rejected
+    out = extend_selected(labels, xyz, t, scores, [0], params)
+    assert out[-1] == 0  # the lone return joins
+    assert (out[track_t.size : -1] == 1).all()  # the rejected cluster does not
