@@ -178,12 +178,13 @@ def main(argv=None) -> int:
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
     ap.add_argument("--clusters", action="store_true", help="print drone clusters' features")
+    ap.add_argument("--duration", type=float, help="simulate this many seconds (default: all)")
     args = ap.parse_args(argv)
     values = parse_assignments(args.param)
     total: Counter = Counter()
     for scenario in args.scenarios:
         for seed in args.seeds:
-            sim = load_sim(scenario, seed, args.cache)
+            sim = load_sim(scenario, seed, args.cache, args.duration)
             offset = [float(v) for v in sim.prism_offset]
             params = detector_params({**values, "target_offset": offset})
             tr = trace(sim, params)

@@ -1,0 +1,48 @@
+"""The loss diagnostic replays the offline stages and accounts for every missed sample."""
+
+from __future__ import annotations
+
+import importlib.util
+import re
+import sys
+from pathlib import Path
+
+_DIR = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+def _load():
+    sys.path.insert(0, str(_DIR))
+    spec = importlib.util.spec_from_file_location("diagnose_losses", _DIR / "diagnose_losses.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_observable_sample_is_hit_or_has_a_reason(tmp_path, capsys):
+    diagnose = _load()
+    assert (
+        diagnose.main(
+            [
+                "--scenarios",
+                "default",
+                "--seeds",
+                "0",
+                "--duration",
+                "8",
+                "--cache",
+                str(tmp_path),
+                "--clusters",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    total = re.search(r"TOTAL observable (\d+), hit (\d+)", out)
+    assert total, out
+    observable, hit = int(total.group(1)), int(total.group(2))
+    assert observable > 0
+    reasons = [int(m.group(1)) for m in re.finditer(r"^\s+(\d+)\s+[\d.]+%", out, re.M)]
+    assert hit + sum(reasons) == observable, out
+    stages = re.search(r"drone points raw=(\d+) usable=(\d+) denoise=(\d+) static=(\d+)", out)
+    raw, usable, denoised, kept = (int(g) for g in stages.groups())
+    assert raw >= usable >= denoised >= kept
