@@ -13,10 +13,14 @@ State (all bounded whatever the stream length):
 
 Every ``recluster_period`` seconds of stream time the pending frames go into the
 persistence map, the non-static history points are clustered (voxel connected
-components), each cluster is scored by the same code as offline and the best candidate
-becomes the track. Between re-clusterings, new points within ``track_gate`` metres of
-the predicted position extend the track. The estimate for a frame is a weighted
-straight-line fit over the track's last ``track_window`` seconds at the frame stamp.
+components, then track linking), each cluster is scored by the same code as offline and
+the best candidate becomes the track; returns the previous track had gathered since are
+carried over, and the history after the track's newest sample is caught up. Between
+re-clusterings, new points within ``track_gate`` metres of the predicted position extend
+the track, up to ``max_gap`` seconds after its newest sample. The estimate for a frame is
+a weighted straight-line fit over the track's last ``track_window`` seconds (at least its
+last three samples) at the frame stamp, reported while the newest sample is at most
+``max_extrapolation`` old (``max_gap`` for a track slower than ``min_speed``).
 """
 
 from __future__ import annotations
