@@ -6,8 +6,7 @@
    (``static_suppression``) drop points in persistently occupied voxels.
 3. Cluster the global cloud (voxel connected components, or DBSCAN) and link the
    fragments of one sparse moving object into one cluster (:mod:`~.linking`).
-4. Score every cluster from its local windows; split clusters rejected for their motion
-   with finer voxels and score the pieces; gate; select the drone cluster(s); grow
+4. Score every cluster from its local windows; gate; select the drone cluster(s); grow
    each selected track at its ends by the noise points and small clusters it was
    heading for.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
@@ -107,51 +106,6 @@ def global_clusters(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> tuple[n
     return labels, k
 
 
-def split_rejected(
-    labels: np.ndarray,
-    k: int,
-    xyz: np.ndarray,
-    t: np.ndarray,
-    scores: ClusterScores,
-    params: ParamSet,
-    *,
-    t0: float | None = None,
-    min_track_seconds: float | None = None,
-) -> tuple[np.ndarray, int, ClusterScores]:
-    """Re-cluster with voxels of ``split_voxel`` the clusters rejected for how they move
-    (gates passed, confidence below ``min_confidence``, at least twice
-    ``min_cluster_points`` points), and score the pieces: a drone and the birds circling
-    it a few metres away are one cluster at ``cluster_voxel``, and neither moves smoothly
-    as a whole. Returns the new labels, K and scores (the inputs when nothing was split).
-    ``t0`` and ``min_track_seconds`` are passed on to :func:`score_clusters`."""
-    if params.split_voxel <= 0 or k == 0:
-        return labels, k, scores
-    rejected = np.nonzero(
-        scores.candidate
-        & (scores.confidence < params.min_confidence)
-        & (scores.n_points >= 2 * params.min_cluster_points)
-    )[0]
-    if rejected.size == 0:
-        return labels, k, scores
-    fine = params.copy(cluster_voxel=float(params.split_voxel))
-    out = labels.copy()
-    next_label = k
-    for c in rejected:
-        member = np.nonzero(labels == c)[0]
-        sub, n_sub = global_clusters(xyz[member], t[member], fine)
-        if n_sub < 2:
-            continue
-        out[member] = np.where(sub >= 0, sub + next_label, -1)
-        next_label += n_sub
-    if next_label == k:
-        return labels, k, scores
-    out, k_out = relabel_compact(out)
-    rescored = score_clusters(
-        out, xyz, t, params, n_clusters=k_out, t0=t0, min_track_seconds=min_track_seconds
-    )
-    return out, k_out, rescored
-
-
 def extend_selected(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -191,7 +145,6 @@ def detect_offline(
         xyz, t = xyz[moving], t[moving]
     labels, k = global_clusters(xyz, t, params)
     scores = score_clusters(labels, xyz, t, params, n_clusters=k)
-    labels, k, scores = split_rejected(labels, k, xyz, t, scores, params)
     selected = select_clusters(scores, params)
     rows = scores.rows()
     for row in rows:

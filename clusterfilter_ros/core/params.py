@@ -430,16 +430,6 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
-        "split_voxel",
-        "float",
-        1.0,
-        "Voxel edge (m) with which a cluster rejected for how it moves (gates passed, "
-        "below min_confidence, at least 2 x min_cluster_points points) is re-clustered "
-        "and its pieces scored: a drone merged with birds circling it; 0 = no splitting.",
-        minimum=0.0,
-        maximum=20.0,
-    ),
-    ParamSpec(
         "voxel_size",
         "float",
         0.2,
@@ -804,7 +794,6 @@ PAPER_PRESET: dict[str, Any] = {
     "static_suppression": False,
     "cluster_time": 0.0,
     "link_max_gap": 0.0,
-    "split_voxel": 0.0,
     "mid360_min_z": 3.5,
     "min_samples": 10,
     "cluster_voxel": 1.0,

@@ -38,7 +38,7 @@ from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import Frame
-from clusterfilter_ros.core.offline import global_clusters, split_rejected
+from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
@@ -255,17 +255,6 @@ class StreamingDetector:
                     t0=t0,
                     min_track_seconds=p.stream_min_track_seconds,
                 )
-                labels, k, scores = split_rejected(
-                    labels,
-                    k,
-                    xyz,
-                    t,
-                    scores,
-                    p,
-                    t0=t0,
-                    min_track_seconds=p.stream_min_track_seconds,
-                )
-                self._clusters = k
                 chosen = select_clusters(scores, p)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.

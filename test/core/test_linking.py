@@ -215,33 +215,3 @@ def test_track_growth_does_not_take_a_scored_and_rejected_cluster():
     out = extend_selected(labels, xyz, t, scores, [0], params)
     assert out[-1] == 0  # the lone return joins
     assert (out[track_t.size : -1] == 1).all()  # the rejected cluster does not
-
-
-def test_a_drone_merged_with_a_circling_bird_is_split_out():
-    from clusterfilter_ros.core.offline import split_rejected
-
-    rng = np.random.default_rng(13)
-    t = np.repeat(np.arange(0.0, 8.0, 0.1), 3)
-    drone = np.stack([2.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], axis=1)
-    drone += rng.normal(0, 0.08, drone.shape)
-    # A bird circling the drone 5 m away, weaving up and down (a local extent gate wide
-    # enough for the pair, so that only their motion rejects them).
-    ang = 1.2 * t
-    bird = drone + np.stack(
-        [5.0 * np.cos(ang), 5.0 * np.sin(ang), 0.6 * np.sin(2 * np.pi * t / 1.1)], axis=1
-    )
-    xyz = np.concatenate([drone, bird])
-    tt = np.concatenate([t, t])
-    is_drone = np.repeat([True, False], t.size)
-    params = detector_params({"max_local_extent": 12.0})
-    merged = np.zeros(tt.size, np.int64)
-    scores = score_clusters(merged, xyz, tt, params, n_clusters=1)
-    assert scores.candidate[0]
-    assert scores.confidence[0] < params.min_confidence  # the pair does not move smoothly
-    labels, k, split = split_rejected(merged, 1, xyz, tt, scores, params)
-    assert k >= 2
-    best = int(np.argmax(split.confidence))
-    assert split.confidence[best] >= params.min_confidence
-    assert is_drone[labels == best].mean() > 0.95
-    off, k_off, _ = split_rejected(merged, 1, xyz, tt, scores, params.copy(split_voxel=0.0))
-    assert k_off == 1 and np.array_equal(off, merged)
