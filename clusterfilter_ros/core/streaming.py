@@ -18,9 +18,10 @@ the best candidate becomes the track; returns the previous track had gathered si
 carried over, and the history after the track's newest sample is caught up. Between
 re-clusterings, new points within ``track_gate`` metres of the predicted position extend
 the track, up to ``max_gap`` seconds after its newest sample. The estimate for a frame is
-a weighted straight-line fit over the track's last ``track_window`` seconds (at least its
-last three samples) at the frame stamp, reported while the newest sample is at most
-``max_extrapolation`` old (``max_gap`` for a track slower than ``min_speed``).
+a weighted straight-line fit (a quadratic for a well-sampled, fresh track) over the
+track's last ``track_window`` seconds (at least its last three samples) at the frame
+stamp, reported while the newest sample is at most ``max_extrapolation`` old
+(``max_gap`` for a track slower than ``min_speed``).
 """
 
 from __future__ import annotations
@@ -358,8 +359,10 @@ class StreamingDetector:
 
     def _predict(self, stamp: float) -> tuple[np.ndarray, int, float, float] | None:
         """(position, points, age of the newest sample, speed) at ``stamp`` from a weighted
-        straight-line fit over the track's last track_window seconds of samples, or None
-        without a sample at or before ``stamp``."""
+        fit over the track's last track_window seconds of samples (at least the last
+        three), or None without a sample at or before ``stamp``. The fit is a straight
+        line, or a quadratic when at least 6 samples span 0.6 s, the newest is at most two
+        frame periods old and the fitted acceleration is at most ``max_accel``."""
         p = self.params
         newest = [s.t for s in self._track if s.t <= stamp]
         if not newest:
@@ -383,7 +386,18 @@ class StreamingDetector:
             slope = (ws[:, None] * dt[:, None] * (ps - mean)).sum(axis=0) / float(
                 np.sum(ws * dt * dt)
             )
-        return mean + slope * (stamp - tc), n, stamp - last, float(np.linalg.norm(slope))
+        age, speed = stamp - last, float(np.linalg.norm(slope))
+        if ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= 2 * p.frame_period:
+            # A well-sampled, fresh track: a quadratic follows a turn or a change of speed
+            # without the straight line's lag, unless its acceleration is implausible.
+            dt = ts - tc
+            sw = np.sqrt(ws)[:, None]
+            design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1) * sw
+            coef = np.linalg.lstsq(design, ps * sw, rcond=None)[0]
+            if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
+                x = stamp - tc
+                return coef[0] + coef[1] * x + coef[2] * x * x, n, age, speed
+        return mean + slope * (stamp - tc), n, age, speed
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
         """Append the frame's points within ``track_gate`` of the track's predicted
