@@ -13,8 +13,9 @@ was heading:
 - a pair (A, B) is a candidate when the gap ``dt = t_first(B) - t_last(A)`` is between
   ``-frame_period`` and ``link_max_gap`` and the distance between B's start and A's
   end carried forward by A's velocity (or A's end and B's start carried back by B's
-  velocity, whichever is smaller) is within ``link_gate + link_max_accel * dt^2 / 2``;
-  without either velocity the reach is ``link_gate + link_max_speed * dt`` instead;
+  velocity, whichever is smaller) is within ``link_gate + link_max_accel * dt^2 / 2``
+  (never more than ``link_gate + link_max_speed * dt``); two fragments without a velocity
+  link only across one frame period, by the distance between A's end and B's start;
 - candidates are taken greedily, best first (distance relative to the reach plus gap
   relative to ``link_max_gap``, so that the next fragment in time is not skipped), each
   cluster getting at most one successor and one predecessor, so a chain is one object's
