@@ -39,6 +39,17 @@ _BLOCK = 512
 _BLOCK_CELLS = 1 << 18
 
 
+def linking_reach(gap: np.ndarray, params: ParamSet) -> np.ndarray:
+    """Distance (m) a fragment may be from where the previous one was heading after
+    ``gap`` seconds: ``link_gate + link_max_accel * gap^2 / 2``, at most
+    ``link_gate + link_max_speed * gap``."""
+    gap = np.abs(np.asarray(gap, dtype=np.float64))
+    return np.minimum(
+        params.link_gate + 0.5 * params.link_max_accel * gap * gap,
+        params.link_gate + params.link_max_speed * gap,
+    )
+
+
 def _frame_samples(
     labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, frame_period: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -160,10 +171,7 @@ def link_fragments(
         dist = np.minimum(dist, np.where(known_b, back, np.inf))
         any_v = known_a | known_b
         dist = np.where(any_v, dist, plain)
-        reach = np.minimum(
-            params.link_gate + 0.5 * params.link_max_accel * adt * adt,
-            params.link_gate + params.link_max_speed * adt,
-        )
+        reach = linking_reach(adt, params)
         # Two fragments without a velocity link only across one frame period: chains
         # of single sparse returns (far structure, noise) would otherwise form.
         valid &= any_v | (adt <= fp + 1e-6)
@@ -263,10 +271,7 @@ def extend_track(
                 reach = np.where(adt <= fp + 1e-6, params.link_gate, -1.0)
             else:
                 pred = pos + dt[:, None] * vel
-                reach = np.minimum(
-                    params.link_gate + 0.5 * params.link_max_accel * adt * adt,
-                    params.link_gate + params.link_max_speed * adt,
-                )
+                reach = linking_reach(adt, params)
             ok = np.linalg.norm(xyz[pool_idx[cand]] - pred, axis=1) <= reach
             if not ok.any():
                 break

@@ -415,8 +415,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "link_max_speed",
         "float",
         15.0,
-        "Track linking: fastest speed (m/s) assumed for a fragment too short to have a "
-        "velocity; the reach grows by link_max_speed * gap, and never beyond that.",
+        "Track linking: fastest speed (m/s) of a linked object; the reach never exceeds "
+        "link_gate + link_max_speed * gap.",
         minimum=0.0,
         maximum=200.0,
     ),

@@ -488,10 +488,9 @@ def track_residual(
     span_needed = 0.5 * window if min_span is None else float(min_span)
     # Three distinct instants at least (0.05 s apart): points from two frames only fit a
     # line exactly, and their quadratic term is unbounded.
-    instants = np.unique(
-        inv * (int(span * window / 0.05) + 2) + np.floor(rel / 0.05).astype(np.int64)
-    )
-    n_instants = np.bincount(instants // (int(span * window / 0.05) + 2), minlength=m)
+    stride = int(span * window / 0.05) + 2  # more 0.05 s instants than the data spans
+    instants = np.unique(inv * stride + np.floor(rel / 0.05).astype(np.int64))
+    n_instants = np.bincount(instants // stride, minlength=m)
     ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed) & (n_instants >= 3)
     if not ok.any():
         return (out, none) if evidence else out
