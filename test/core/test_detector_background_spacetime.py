@@ -92,6 +92,34 @@ def test_compact_static_group_is_kept_for_hover_detection():
     assert set(kept.tolist()) == set(np.unique(drone).tolist())
 
 
+def test_drone_hovering_near_a_wall_is_not_merged_with_it():
+    # Voxel-centre positions (static_voxel 1.5 m): a wall in the plane y = 18.75 and a
+    # drone 1.5 m up and 1.5 m out from its top edge, one voxel diagonally apart
+    # (not touching). Grouping on a 3 m grid merged the two (hover seed 3).
+    from clusterfilter_ros.core.background import compact_static_keys
+
+    params = detector_params()
+    sv = params.static_voxel
+    wall = voxel.voxel_keys(
+        np.array(
+            [
+                [x, 18.75, z]
+                for x in np.arange(-30.75, -14.0, sv)
+                for z in (0.75, 2.25, 3.75, 5.25, 6.75)
+            ]
+        ),
+        sv,
+    )
+    drone = voxel.voxel_keys(np.array([[-20.25, 15.75, 9.75], [-21.75, 15.75, 9.75]]), sv)
+    keys = np.unique(np.concatenate([wall, drone]))
+    kept = compact_static_keys(keys, params)
+    assert set(kept.tolist()) == set(np.unique(drone).tolist())
+    # Touching the wall (one voxel out from its face), the drone is part of it.
+    touching = voxel.voxel_keys(np.array([[-20.25, 17.25, 6.75]]), sv)
+    keys = np.unique(np.concatenate([wall, touching]))
+    assert compact_static_keys(keys, params).size == 0
+
+
 def test_hovering_object_detected_offline_only_with_hover_detection():
     from clusterfilter_ros.core.frame import MID360, Frame
     from clusterfilter_ros.core.offline import detect_offline
