@@ -281,3 +281,39 @@ def extend_track(
             taken[join] = True
             member[pool_idx[join]] = True
     return member
+
+
+def fill_track(
+    member: np.ndarray, xyz: np.ndarray, t: np.ndarray, pool: np.ndarray, params: ParamSet
+) -> np.ndarray:
+    """Fill the gaps inside a selected track with points of ``pool`` lying on its path.
+
+    :func:`extend_track` grows a track at its two ends only. Inside it, a drone seen
+    once a second (hovering, or far away) leaves returns the clusterer calls noise
+    between the ones it kept, and gaps of several seconds without a kept one. A pool
+    point between two consecutive per-frame samples of the track joins it when it lies
+    within the linking reach of the position interpolated linearly at its stamp: the
+    reach for half the gap (a path bending at ``link_max_accel`` leaves the chord by at
+    most that much at the middle), at most the reach for half of ``link_max_gap``.
+    Returns the new member mask.
+    """
+    member = np.asarray(member, dtype=bool).copy()
+    pool = np.asarray(pool, dtype=bool) & ~member
+    m = np.nonzero(member)[0]
+    if m.size < 2 or not pool.any() or params.link_max_gap <= 0:
+        return member
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(t, dtype=np.float64)
+    _, ts, ps, _, _ = _frame_samples(
+        np.zeros(m.size, np.int64), xyz[m], t[m], 1, float(params.frame_period)
+    )
+    idx = np.nonzero(pool & (t > ts[0]) & (t < ts[-1]))[0]
+    if idx.size == 0:
+        return member
+    j = np.clip(np.searchsorted(ts, t[idx], side="right"), 1, ts.size - 1)
+    gap = ts[j] - ts[j - 1]
+    w = np.clip((t[idx] - ts[j - 1]) / np.maximum(gap, 1e-9), 0.0, 1.0)[:, None]
+    pred = ps[j - 1] + w * (ps[j] - ps[j - 1])
+    reach = linking_reach(np.minimum(gap, params.link_max_gap) / 2, params)
+    member[idx[np.linalg.norm(xyz[idx] - pred, axis=1) <= reach]] = True
+    return member

@@ -8,7 +8,7 @@
    fragments of one sparse moving object into one cluster (:mod:`~.linking`).
 4. Score every cluster from its local windows; gate; select the drone cluster(s); grow
    each selected track at its ends by the noise points and small clusters it was
-   heading for.
+   heading for, and fill it inside with those on its path.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
    (or given timestamps) inside the supported span.
 """
@@ -30,7 +30,7 @@ from clusterfilter_ros.core.clustering import (
     voxel_cluster_points,
 )
 from clusterfilter_ros.core.frame import Frame, TimedPositions
-from clusterfilter_ros.core.linking import extend_track, link_fragments
+from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragments
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
@@ -115,14 +115,15 @@ def extend_selected(
     params: ParamSet,
 ) -> np.ndarray:
     """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
-    by noise points and clusters too small to be scored (< ``min_cluster_points``)."""
+    and filled inside (:func:`~.linking.fill_track`) by noise points and clusters too
+    small to be scored (< ``min_cluster_points``)."""
     # Only what is too small to be judged on its own: a cluster that was scored and
     # rejected (an erratic bird, say) must not re-enter through a neighbouring track.
     small = scores.n_points < params.min_cluster_points
     pool = (labels < 0) | small[np.maximum(labels, 0)]
     out = labels.copy()
     for c in selected:
-        member = extend_track(out == c, xyz, t, pool, params)
+        member = fill_track(extend_track(out == c, xyz, t, pool, params), xyz, t, pool, params)
         pool &= ~member
         out[member] = c
     return out

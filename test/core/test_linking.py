@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clusterfilter_ros.core.linking import extend_track, link_fragments
+from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragments
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import group_median, score_clusters
 
@@ -85,6 +85,42 @@ def test_extend_track_takes_points_on_the_path_only():
     out = extend_track(member, all_xyz, all_t, pool, detector_params())
     assert out[-3] and out[-2]
     assert not out[-1]
+
+
+def test_fill_track_takes_returns_inside_its_gaps_on_its_path_only():
+    # A drone hovering at (5, 5, 15), kept by the clusterer at 0-2 s and 5.5-7 s; single
+    # returns at 3 s and 4.2 s (inside a 3.5 s gap), one 6 m off, one after the track.
+    rng = np.random.default_rng(8)
+    kept_t = np.concatenate([np.arange(0.0, 2.0, 0.3), np.arange(5.5, 7.0, 0.3)])
+    kept = np.array([5.0, 5.0, 15.0]) + rng.normal(0, 0.1, (kept_t.size, 3))
+    extra_t = np.array([3.0, 4.2, 3.6, 8.0])
+    extra = np.array([[5.2, 4.9, 15.1], [4.8, 5.1, 14.9], [11.0, 5.0, 15.0], [5.0, 5.0, 15.0]])
+    xyz = np.concatenate([kept, extra])
+    t = np.concatenate([kept_t, extra_t])
+    member = np.arange(t.size) < kept_t.size
+    out = fill_track(member, xyz, t, ~member, detector_params())
+    assert out[: kept_t.size].all()
+    assert out[-4] and out[-3]  # on the path, inside the gap
+    assert not out[-2]  # 6 m off the path
+    assert not out[-1]  # after the track's end: extend_track's business, not this
+    # Points outside the pool are never taken.
+    pool = ~member
+    pool[-4] = False
+    assert not fill_track(member, xyz, t, pool, detector_params())[-4]
+
+
+def test_fill_track_follows_a_moving_track():
+    # 8 m/s along x with a 1.5 s hole; returns in the hole on the line join, one 4 m
+    # to the side does not.
+    t = np.concatenate([np.arange(0.0, 2.0, 0.1), np.arange(3.5, 5.0, 0.1)])
+    xyz = np.stack([8.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], axis=1)
+    hole_t = np.array([2.5, 3.0, 2.8])
+    hole = np.array([[20.0, 0.3, 20.0], [24.0, -0.2, 20.0], [22.4, 4.0, 20.0]])
+    member = np.concatenate([np.ones(t.size, bool), np.zeros(3, bool)])
+    out = fill_track(
+        member, np.concatenate([xyz, hole]), np.concatenate([t, hole_t]), ~member, detector_params()
+    )
+    assert out[-3] and out[-2] and not out[-1]
 
 
 def test_group_median():
