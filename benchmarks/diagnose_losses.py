@@ -95,6 +95,7 @@ def trace(sim, params):
         "drone_all": drone,
         "after_denoise": after_denoise,
         "kept": keep,
+        "xyz": kx,
         "t": kt,
         "drone": kd,
         "classes": kc,
