@@ -93,9 +93,9 @@ def test_compact_static_group_is_kept_for_hover_detection():
 
 
 def test_drone_hovering_near_a_wall_is_not_merged_with_it():
-    # Voxel-centre positions (static_voxel 1.5 m): a wall in the plane y = 18.75 and a
-    # drone 1.5 m up and 1.5 m out from its top edge, one voxel diagonally apart
-    # (not touching). Grouping on a 3 m grid merged the two (hover seed 3).
+    # Voxel-centre positions (static_voxel 1.5 m): a wall in the plane y = 18.75 up to
+    # z = 6.75 and a drone 3 m out from it and 3 m above its top, two voxels away on
+    # each axis (not touching). Grouping on a 3 m grid merged the two (hover seed 3).
     from clusterfilter_ros.core.background import compact_static_keys
 
     params = detector_params()
