@@ -145,10 +145,12 @@ class StreamingDetector:
             keep = self._denoise(frame.sensor, stamp, xyz)
             xyz, t = xyz[keep], t[keep]
         static_keys = voxel.voxel_keys(xyz, self.params.static_voxel)
-        self._pending.append((static_keys, t))
+        uk, inverse = np.unique(static_keys, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        self._pending.append(self._distinct_hits(uk, inverse, static_keys, t))
         if self.params.static_suppression and self._static.size and xyz.shape[0]:
             # Points in voxels already known static never reach the local history.
-            moving = voxel.lookup(self._static, static_keys) < 0
+            moving = (voxel.lookup(self._static, uk) < 0)[inverse]
             xyz, t, static_keys = xyz[moving], t[moving], static_keys[moving]
         self._chunks.append(_Chunk(stamp, xyz, t, static_keys))
         self._chunk_points += xyz.shape[0]
@@ -201,12 +203,26 @@ class StreamingDetector:
         recent = self._denoise_recent.setdefault(sensor, voxel.SlidingVoxelCounts())
         keys = voxel.voxel_keys(xyz, p.denoise_voxel)
         recent.evict_before(self._now - p.denoise_window)
-        recent.add(stamp, keys)
+        uk, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        recent.add_unique(stamp, uk, counts)
         if xyz.shape[0] == 0:
             return np.zeros(0, bool)
-        uk, inverse = np.unique(keys, return_inverse=True)
-        density = recent.neighbourhood_counts(uk)
-        return density[inverse.reshape(-1)] >= p.denoise_min_points
+        dense = recent.neighbourhood_at_least(uk, int(p.denoise_min_points))
+        return dense[inverse.reshape(-1)]
+
+    def _distinct_hits(
+        self, uk: np.ndarray, inverse: np.ndarray, keys: np.ndarray, t: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A frame's hits for the persistence map: one (voxel, time) per voxel when the
+        whole frame falls in one ``static_bin`` (the map keeps one bit per voxel and
+        bin, so repeats change nothing), else every point's."""
+        if t.size == 0:
+            return keys, t
+        width = self.params.static_bin
+        first = math.floor(float(t.min()) / width)
+        if math.floor(float(t.max()) / width) != first:
+            return keys, t
+        return uk, np.full(uk.size, (first + 0.5) * width)
 
     def _evict_chunks(self) -> None:
         lo = self._now - self.params.local_history

@@ -189,6 +189,10 @@ class SlidingVoxelCounts:
     def add(self, stamp: float, keys: np.ndarray) -> None:
         """Add one frame's (unsorted, repeated) voxel keys."""
         uk, cnt = np.unique(np.asarray(keys, dtype=np.int64), return_counts=True)
+        self.add_unique(stamp, uk, cnt)
+
+    def add_unique(self, stamp: float, uk: np.ndarray, cnt: np.ndarray) -> None:
+        """Add one frame given as its sorted unique voxel keys and their point counts."""
         self._frames.append((float(stamp), uk, cnt))
         if uk.size == 0:
             return
@@ -211,6 +215,26 @@ class SlidingVoxelCounts:
         if removed:
             keep = self.counts > 0
             self.keys, self.counts = self.keys[keep], self.counts[keep]
+
+    def neighbourhood_at_least(self, queries: np.ndarray, n: int) -> np.ndarray:
+        """(Q,) bool: the 3x3x3 neighbourhood of each query key holds >= ``n`` points.
+
+        Equal to ``neighbourhood_counts(queries) >= n``, but a query stops being looked
+        up once it has ``n`` (a dense voxel needs no neighbours: full frames are mostly
+        that).
+        """
+        queries = np.asarray(queries, dtype=np.int64)
+        total = np.zeros(queries.shape, np.int64)
+        if self.keys.size == 0 or queries.size == 0:
+            return total >= n
+        open_ = np.arange(queries.size)
+        for off in _NEIGHBOURHOOD_KEYS:
+            idx = lookup(self.keys, queries[open_] + off)
+            total[open_] += np.where(idx >= 0, self.counts[np.maximum(idx, 0)], 0)
+            open_ = open_[total[open_] < n]
+            if open_.size == 0:
+                break
+        return total >= n
 
     def neighbourhood_counts(self, queries: np.ndarray) -> np.ndarray:
         """Points in the 3x3x3 voxel neighbourhood of each query key (itself included)."""

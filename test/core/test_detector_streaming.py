@@ -185,3 +185,31 @@ def test_a_return_after_a_gap_is_associated_and_not_averaged_with_the_old_ones()
     # A return far from the prediction is not associated.
     det._extend_track(1.2, np.array([[30.0, 30.0, 20.0]], np.float32), np.array([1.2]))
     assert det._track[-1].t == t_new
+
+
+def test_persistence_map_is_the_same_with_one_hit_per_voxel_and_bin():
+    # The detector records one hit per (voxel, static_bin) of a frame when the frame lies
+    # in one bin; the map must equal one fed every point, also for frames whose points
+    # straddle a bin boundary (per-point times).
+    from clusterfilter_ros.core import voxel
+    from clusterfilter_ros.core.background import BackgroundGrid
+
+    rng = np.random.default_rng(11)
+    params = detector_params({"warmup": 0.0})
+    det = StreamingDetector(params)
+    raw = BackgroundGrid(params)
+    pending_keys, pending_t = [], []
+    last = -np.inf
+    for i in range(60):
+        stamp = 100.0 + 0.1 * i
+        xyz = rng.uniform([-20, -20, 2], [20, 20, 12], (500, 3)).astype(np.float32)
+        offsets = rng.uniform(0.0, 0.1, 500) if i % 3 == 0 else None
+        det.push(Frame(stamp, MID360, xyz, point_time=offsets))
+        t = stamp + (offsets if offsets is not None else np.zeros(500))
+        pending_keys.append(voxel.voxel_keys(xyz, params.static_voxel))
+        pending_t.append(t)
+        if stamp - last >= params.recluster_period:
+            raw.update(np.concatenate(pending_keys), np.concatenate(pending_t), stamp)
+            pending_keys, pending_t, last = [], [], stamp
+    assert np.array_equal(det._background.keys, raw.keys)
+    assert np.array_equal(det._background.masks, raw.masks)

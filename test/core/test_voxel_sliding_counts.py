@@ -42,3 +42,15 @@ def test_incremental_window_matches_recount():
             window.neighbourhood_counts(queries), brute_neighbourhood(all_keys, queries)
         )
     assert len(window) == 11  # stamps 2.9 .. 3.9 (1 s window at 10 Hz)
+
+
+def test_neighbourhood_at_least_equals_the_count_threshold():
+    rng = np.random.default_rng(4)
+    window = voxel.SlidingVoxelCounts()
+    for k in range(10):
+        window.add(0.1 * k, voxel.voxel_keys(rng.normal(0.0, 2.0, size=(200, 3)), 1.0))
+    queries = np.unique(voxel.voxel_keys(rng.normal(0.0, 4.0, size=(300, 3)), 1.0))
+    counts = window.neighbourhood_counts(queries)
+    for n in (1, 3, 10, 50):
+        assert np.array_equal(window.neighbourhood_at_least(queries, n), counts >= n)
+    assert not voxel.SlidingVoxelCounts().neighbourhood_at_least(queries, 1).any()
