@@ -137,6 +137,8 @@ def link_fragments(
     tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, ts <= t_first[cid] + win, k)
     end_pos = pm_e + v_e * (t_last - tm_e)[:, None]
     start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
+    speed_e = np.linalg.norm(v_e, axis=1)
+    speed_s = np.linalg.norm(v_s, axis=1)
     idx = np.nonzero(eligible)[0]
     order = idx[np.argsort(t_first[idx], kind="stable")]
     starts = t_first[order]
@@ -161,27 +163,34 @@ def link_fragments(
         aa = np.broadcast_to(a[:, None], b.shape)
         valid &= b != aa
         valid &= t_first[b] > t_first[aa]  # B must start after A started
+        aa, b = aa[valid], b[valid]
         dt = t_first[b] - t_last[aa]
         adt = np.abs(dt)
-        fwd = np.linalg.norm(end_pos[aa] + v_e[aa] * dt[..., None] - start_pos[b], axis=-1)
-        back = np.linalg.norm(start_pos[b] - v_s[b] * dt[..., None] - end_pos[aa], axis=-1)
-        plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
         known_a, known_b = has_e[aa], has_s[b]
+        any_v = known_a | known_b
+        reach = linking_reach(adt, params)
+        plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
+        # Two fragments without a velocity link only across one frame period: chains
+        # of single sparse returns (far structure, noise) would otherwise form. And
+        # carried by a velocity v over dt, an end gets at most |v| dt closer to a start:
+        # pairs farther apart than that plus the reach cannot link (most of a scene).
+        speed = np.maximum(np.where(known_a, speed_e[aa], 0.0), np.where(known_b, speed_s[b], 0.0))
+        near = (any_v | (adt <= fp + 1e-6)) & (plain - speed * adt <= reach + 1e-6)
+        aa, b, dt, adt, known_a, known_b, any_v, reach, plain = (
+            x[near] for x in (aa, b, dt, adt, known_a, known_b, any_v, reach, plain)
+        )
+        fwd = np.linalg.norm(end_pos[aa] + v_e[aa] * dt[:, None] - start_pos[b], axis=-1)
+        back = np.linalg.norm(start_pos[b] - v_s[b] * dt[:, None] - end_pos[aa], axis=-1)
         dist = np.where(known_a, fwd, np.inf)
         dist = np.minimum(dist, np.where(known_b, back, np.inf))
-        any_v = known_a | known_b
         dist = np.where(any_v, dist, plain)
-        reach = linking_reach(adt, params)
-        # Two fragments without a velocity link only across one frame period: chains
-        # of single sparse returns (far structure, noise) would otherwise form.
-        valid &= any_v | (adt <= fp + 1e-6)
-        valid &= dist <= reach
-        pairs_a.append(aa[valid])
-        pairs_b.append(b[valid])
+        ok = dist <= reach
+        pairs_a.append(aa[ok])
+        pairs_b.append(b[ok])
         # Distance relative to the reach, plus the gap relative to link_max_gap: the next
         # fragment in time comes first (by distance alone, the reach growing with the gap
         # would let A skip over B to C, leaving B alone).
-        pairs_cost.append(dist[valid] / reach[valid] + adt[valid] / gap)
+        pairs_cost.append(dist[ok] / reach[ok] + adt[ok] / gap)
     if not pairs_a:
         return labels, k
     pa, pb, cost = (np.concatenate(x) for x in (pairs_a, pairs_b, pairs_cost))
