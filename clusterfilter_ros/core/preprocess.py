@@ -13,10 +13,11 @@ def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
     xyz = frame.xyz
     if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
         return np.zeros(xyz.shape[0], dtype=bool)
-    keep = np.isfinite(xyz).all(axis=1)
-    keep &= (xyz != 0).any(axis=1)
+    # One pass: the squared range (in float64, so no finite float32 overflows) is NaN or
+    # infinite for a row with a NaN or infinite coordinate and 0 only for an all-zero
+    # padding row, and both comparisons are False for NaN.
     r2 = np.einsum("ij,ij->i", xyz, xyz, dtype=np.float64)
-    keep &= r2 <= float(params.max_range) ** 2
+    keep = (r2 > 0.0) & (r2 <= float(params.max_range) ** 2)
     if frame.sensor == MID360:
         keep &= xyz[:, 2] > params.mid360_min_z
     return keep
