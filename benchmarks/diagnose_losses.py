@@ -11,20 +11,34 @@ was not reported) is counted.
 
 Prints, per run, the drone points surviving each stage and the miss reasons; with
 ``--clusters`` also the features of every cluster holding drone points.
+
+``--mode stream`` pushes the frames through a :class:`StreamingDetector` instead and
+records, at every re-clustering, the cluster holding the history's points within 1.5 m of
+the drone's true position (the streaming history carries no labels). A missed sample is
+put down to the state at the last frame before it: no cluster scored yet, no drone
+return in the history, the returns left as noise, a failed gate, too low a confidence
+(with the factors below their thresholds), or a confirmed track that reported nothing
+or reported something else.
+
+    .venv/bin/python benchmarks/diagnose_losses.py --mode stream --seeds 0 1 2 3 4 5 \
+        --scenarios default takeoff_landing flyover fast_pass hover avia_only
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
+from clusterfilter_ros.core import streaming
 from clusterfilter_ros.core.background import static_mask_offline
 from clusterfilter_ros.core.clustering import density_mask
-from clusterfilter_ros.core.evaluation import observable_mask
+from clusterfilter_ros.core.evaluation import interpolate_predictions, observable_mask
+from clusterfilter_ros.core.frame import TimedPositions
 from clusterfilter_ros.core.offline import detect_offline, extend_selected, global_clusters
 from clusterfilter_ros.core.params import detector_params, parse_assignments
 from clusterfilter_ros.core.preprocess import frame_points, usable_mask
@@ -120,6 +134,19 @@ def gate_failures(scores, c: int, params) -> list[str]:
     return out
 
 
+def hit_mask(gt, est_stamps: np.ndarray, est_xyz: np.ndarray) -> np.ndarray:
+    """(G,) bool: the evaluator's rule (``clusterfilter evaluate``): the estimate
+    interpolated between the two nearest rows, both within 0.3 s, is within 2 m."""
+    order = np.argsort(est_stamps, kind="stable")
+    pred = TimedPositions(
+        np.asarray(est_stamps, dtype=np.float64)[order],
+        np.asarray(est_xyz, dtype=np.float64).reshape(-1, 3)[order],
+    )
+    at = interpolate_predictions(pred, gt.stamps, 0.3)
+    with np.errstate(invalid="ignore"):
+        return np.linalg.norm(at - gt.xyz, axis=1) <= 2.0
+
+
 def miss_reasons(sim, tr, result, params) -> Counter:
     gt = sim.sequence.ground_truth
     reasons: Counter = Counter()
@@ -127,13 +154,7 @@ def miss_reasons(sim, tr, result, params) -> Counter:
         return reasons
     obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
     est = result.estimates
-    hit = np.zeros(len(gt), bool)
-    if len(est):
-        j = np.clip(np.searchsorted(est.stamps, gt.stamps), 1, len(est) - 1)
-        for jj in (j - 1, j):
-            close = np.abs(est.stamps[jj] - gt.stamps) <= 0.3
-            d = np.linalg.norm(est.xyz[jj] - gt.xyz, axis=1)
-            hit |= close & (d <= 2.0)
+    hit = hit_mask(gt, est.stamps, est.xyz)
     for g in np.nonzero(obs & ~hit)[0]:
         s = gt.stamps[g]
         near_all = np.abs(tr["t_all"] - s) <= 0.5
@@ -172,6 +193,111 @@ def miss_reasons(sim, tr, result, params) -> Counter:
     return reasons
 
 
+def low_confidence_factors(scores, c: int, params) -> str:
+    """The confidence factors of cluster ``c`` below their full-credit thresholds."""
+    below = {
+        "coherence": scores.coherence[c] < params.min_coherence,
+        "speed": scores.apparent_speed[c] < params.min_speed,
+        "support": scores.support_frames[c] < params.min_support_frames,
+        "excess residual": scores.excess_residual[c] > params.smooth_excess,
+        "acceleration": scores.acceleration[c] > params.smooth_accel,
+    }
+    return ",".join(k for k, v in below.items() if v) or "density/IoU"
+
+
+@contextlib.contextmanager
+def _recording_scores(record):
+    """Make the streaming detector's scoring call ``record(labels, xyz, t, params, scores)``."""
+    original = streaming.score_clusters
+
+    def scored(labels, xyz, t, params, **kwargs):
+        scores = original(labels, xyz, t, params, **kwargs)
+        record(labels, xyz, t, params, scores)
+        return scores
+
+    streaming.score_clusters = scored
+    try:
+        yield
+    finally:
+        streaming.score_clusters = original
+
+
+def stream_miss_reasons(sim, params) -> Counter:
+    """Streaming: the cause of every observable ground-truth sample without a hit."""
+    gt = sim.sequence.ground_truth
+    reasons: Counter = Counter()
+    if gt is None or len(gt) == 0:
+        return reasons
+    truth = sim.drone_truth
+    offset = np.asarray(params.target_offset, dtype=np.float64)
+
+    def true_position(t: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(t, truth.stamps, truth.xyz[:, a]) for a in range(3)], 1)
+
+    detector = streaming.StreamingDetector(params)
+    log: list[tuple[float, str]] = []
+
+    def record(labels, xyz, t, p, scores) -> None:
+        near = np.linalg.norm(xyz - true_position(t), axis=1) < 1.5
+        lab = labels[near & (labels >= 0)]
+        if not near.any():
+            cause = "no drone return in the history (filtered or suppressed)"
+        elif lab.size == 0:
+            cause = "the drone's returns left as noise"
+        else:
+            c = int(np.bincount(lab).argmax())
+            gates = gate_failures(scores, c, p)
+            if gates:
+                cause = "gate " + "+".join(gates)
+            elif scores.confidence[c] < p.min_confidence:
+                cause = "low confidence: " + low_confidence_factors(scores, c, p)
+            else:
+                cause = "a confident drone cluster, another one tracked"
+        log.append((detector._now, cause))
+
+    frames = sim.sequence.frames
+    stamps, states, est_t, est_xyz = [], [], [], []
+    with _recording_scores(record):
+        for frame in frames:
+            est = detector.push(frame)
+            stamps.append(frame.stamp)
+            if est is not None:
+                est_t.append(est.stamp)
+                est_xyz.append(est.position - offset)
+                states.append("reported")
+            elif detector._track and detector._selected_conf >= params.min_confidence:
+                pred = detector._predict(frame.stamp)
+                if pred is None:
+                    states.append("a confirmed track without a sample yet")
+                else:
+                    on = np.linalg.norm(pred[0] - true_position(np.array([frame.stamp]))[0]) < 2
+                    age = "<= 1 s" if pred[2] <= 1.0 else "> 1 s"
+                    where = "on the drone" if on else "off the drone"
+                    states.append(
+                        f"a confirmed track not reported: newest sample {age} old, {where}"
+                    )
+            else:
+                states.append("")
+    hit = hit_mask(gt, np.asarray(est_t), np.asarray(est_xyz, dtype=np.float64))
+    obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
+    stamps = np.asarray(stamps)
+    log_t = np.array([t for t, _ in log])
+    for g in np.nonzero(obs & ~hit)[0]:
+        s = gt.stamps[g]
+        i = int(np.searchsorted(stamps, s, side="right")) - 1
+        state = states[i] if i >= 0 else ""
+        if state == "reported":
+            reasons["another object reported, or the estimate > 2 m off"] += 1
+        elif state:
+            reasons[state] += 1
+        else:
+            k = int(np.searchsorted(log_t, s, side="right")) - 1
+            reasons[log[k][1] if k >= 0 else "before any cluster was scored (run start)"] += 1
+    reasons["_observable"] = int(obs.sum())
+    reasons["_hit"] = int((obs & hit).sum())
+    return reasons
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="+", default=["default", "flyover", "hover"])
@@ -180,6 +306,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
     ap.add_argument("--clusters", action="store_true", help="print drone clusters' features")
     ap.add_argument("--duration", type=float, help="simulate this many seconds (default: all)")
+    ap.add_argument("--mode", choices=("offline", "stream"), default="offline")
     args = ap.parse_args(argv)
     values = parse_assignments(args.param)
     total: Counter = Counter()
@@ -188,6 +315,14 @@ def main(argv=None) -> int:
             sim = load_sim(scenario, seed, args.cache, args.duration)
             offset = [float(v) for v in sim.prism_offset]
             params = detector_params({**values, "target_offset": offset})
+            if args.mode == "stream":
+                reasons = stream_miss_reasons(sim, params)
+                total.update(reasons)
+                obs, hit = reasons.pop("_observable", 0), reasons.pop("_hit", 0)
+                print(f"{scenario} s{seed} (stream): observable GT {obs}, hit {hit}")
+                for k, v in reasons.most_common():
+                    print(f"    {v:5d} {k}")
+                continue
             tr = trace(sim, params)
             result = detect_offline(sim.sequence.frames, params)
             reasons = miss_reasons(sim, tr, result, params)

@@ -46,3 +46,22 @@ def test_every_observable_sample_is_hit_or_has_a_reason(tmp_path, capsys):
     stages = re.search(r"drone points raw=(\d+) usable=(\d+) denoise=(\d+) static=(\d+)", out)
     raw, usable, denoised, kept = (int(g) for g in stages.groups())
     assert raw >= usable >= denoised >= kept
+
+
+def test_stream_mode_accounts_for_every_observable_sample(tmp_path, capsys):
+    diagnose = _load()
+    argv = ["--mode", "stream", "--scenarios", "default", "--seeds", "0", "--duration", "8"]
+    assert diagnose.main(argv + ["--cache", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    total = re.search(r"TOTAL observable (\d+), hit (\d+)", out)
+    assert total, out
+    observable, hit = int(total.group(1)), int(total.group(2))
+    assert observable > 0
+    reasons = re.findall(r"^\s+(\d+)\s+[\d.]+% (.+)$", out, re.M)
+    assert hit + sum(int(n) for n, _ in reasons) == observable, out
+    # The first seconds are the warm-up: nothing can be reported there.
+    assert any(name.startswith("before any cluster was scored") for _, name in reasons), out
+    # The scoring hook is removed afterwards.
+    from clusterfilter_ros.core import scoring, streaming
+
+    assert streaming.score_clusters is scoring.score_clusters
