@@ -29,6 +29,7 @@ from clusterfilter_ros.core.clustering import (
     spacetime_cluster_points,
     voxel_cluster_points,
 )
+from clusterfilter_ros.core.estimate import reported_positions
 from clusterfilter_ros.core.frame import Frame, TimedPositions
 from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragments
 from clusterfilter_ros.core.params import ParamSet, detector_params
@@ -184,8 +185,9 @@ def detect_offline(
     support = traj.support(query, params.track_window)
     ok = np.isfinite(pos).all(axis=1) & (conf >= params.min_confidence)
     ok &= support >= params.min_points
-    offset = np.asarray(params.target_offset, dtype=np.float64)
     estimates = TimedPositions(
-        query[ok], pos[ok] + offset, {"confidence": conf[ok], "points": support[ok]}
+        query[ok],
+        reported_positions(pos[ok], params),
+        {"confidence": conf[ok], "points": support[ok]},
     )
     return OfflineResult(estimates, drone_points, traj, rows, scores, selected)

@@ -776,6 +776,26 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100000000,
     ),
     ParamSpec(
+        "surface_depth",
+        "float",
+        0.0,
+        "Every estimate is moved this far (m) away from viewpoint along the line of sight "
+        "before target_offset: lidar returns lie on the side of the drone facing the "
+        "sensors, so their centroid is nearer than the drone's centre.",
+        minimum=0.0,
+        maximum=2.0,
+    ),
+    ParamSpec(
+        "viewpoint",
+        "float_list",
+        [0.0, 0.0, 0.0],
+        "Where the lidars are (x, y, z in m, output frame), for surface_depth: the rig "
+        "origin in the challenge data; the lidars' extrinsic translation in a map frame.",
+        minimum=-100000.0,
+        maximum=100000.0,
+        length=3,
+    ),
+    ParamSpec(
         "target_offset",
         "float_list",
         [0.0, 0.0, 0.0],

@@ -37,7 +37,7 @@ import numpy as np
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid
-from clusterfilter_ros.core.estimate import Estimate
+from clusterfilter_ros.core.estimate import Estimate, reported_positions
 from clusterfilter_ros.core.frame import Frame
 from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
@@ -447,8 +447,7 @@ class StreamingDetector:
         position, n = fit
         if n < p.min_points:
             return None
-        offset = np.asarray(p.target_offset, dtype=np.float64)
-        return Estimate(stamp, position + offset, self._selected_conf, n)
+        return Estimate(stamp, reported_positions(position, p)[0], self._selected_conf, n)
 
 
 def run_streaming(frames: Iterable[Frame], params: ParamSet | None = None) -> list[Estimate]:

@@ -55,6 +55,13 @@ def test_target_offset_and_requested_timestamps(scene):
     assert res.estimates.stamps.tolist() == [1001.05, 1003.333]  # nothing outside the span
     expected = base.trajectory(res.estimates.stamps) + [0, 0, 0.3]
     assert np.allclose(res.estimates.xyz, expected)
+    # surface_depth moves the trajectory's points away from the viewpoint first.
+    params = detector_params({"surface_depth": 0.2, "viewpoint": [0.0, 0.0, 1.0]})
+    deeper = detect_offline(frames, params, timestamps=query)
+    centre = base.trajectory(deeper.estimates.stamps)
+    ray = centre - [0.0, 0.0, 1.0]
+    expected = centre + 0.2 * ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    assert np.allclose(deeper.estimates.xyz, expected)
 
 
 def test_empty_and_degenerate_inputs():

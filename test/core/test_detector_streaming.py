@@ -57,6 +57,17 @@ def test_target_offset_is_applied(scene):
     assert np.allclose(shifted[-1].position - base[-1].position, [1.0, -2.0, 0.5])
 
 
+def test_surface_depth_moves_estimates_away_from_the_viewpoint(scene):
+    frames, _, _ = scene(duration=7.0, wall_points=200)
+    base = run_streaming(frames)
+    deeper = run_streaming(frames, detector_params({"surface_depth": 0.2}))
+    assert len(base) == len(deeper) > 0
+    for a, b in zip(base, deeper, strict=True):
+        step = b.position - a.position
+        assert np.isclose(np.linalg.norm(step), 0.2)
+        assert np.allclose(step / 0.2, a.position / np.linalg.norm(a.position))
+
+
 def test_state_stays_bounded_over_a_long_stream():
     """60 s of a fresh random static cloud every frame: the state must plateau."""
     rng = np.random.default_rng(0)

@@ -62,3 +62,22 @@ def test_nan_points_are_ignored():
     xyz[3] = np.nan
     traj = fit_trajectory(t, xyz, max_gap=1, max_extrapolation=0.1)
     assert np.isfinite(traj(np.array([0.3]))).all()
+
+
+def test_reported_positions_apply_surface_depth_then_target_offset():
+    from clusterfilter_ros.core.estimate import reported_positions
+    from clusterfilter_ros.core.params import detector_params
+
+    centres = np.array([[10.0, 0.0, 0.0], [0.0, 3.0, 4.0], [1.0, 1.0, 1.0]])
+    params = detector_params(
+        {"surface_depth": 0.5, "viewpoint": [1.0, 1.0, 1.0], "target_offset": [0.0, 0.0, 0.25]}
+    )
+    out = reported_positions(centres, params)
+    ray = centres[0] - [1.0, 1.0, 1.0]
+    assert np.allclose(out[0], centres[0] + 0.5 * ray / np.linalg.norm(ray) + [0, 0, 0.25])
+    ray = centres[1] - [1.0, 1.0, 1.0]
+    assert np.allclose(out[1], centres[1] + 0.5 * ray / np.linalg.norm(ray) + [0, 0, 0.25])
+    # At the viewpoint itself there is no direction: only the offset applies.
+    assert np.allclose(out[2], [1.0, 1.0, 1.25])
+    # Off by default: the offset alone.
+    assert np.allclose(reported_positions(centres, detector_params()), centres)
