@@ -204,6 +204,7 @@ class DetectorNode(Node):
             Node.destroy_node(self)  # nothing of ours to stop yet
             raise
         self._values = dict(values)
+        self._warn_if_viewpoint_is_off(values)
         self._detector_lock = threading.Lock()
         self._generation = 0
         self._path: collections.deque[PoseStamped] = collections.deque(maxlen=values["path_length"])
@@ -423,6 +424,24 @@ class DetectorNode(Node):
             self._points_pub.publish(make_pointcloud2(cloud, frame_id, layout="xyz"))
 
     # ---------------------------------------------------------------- parameters
+    def _warn_if_viewpoint_is_off(self, values: Mapping[str, Any]) -> None:
+        """``surface_depth`` pushes estimates away from ``viewpoint`` (output frame): warn
+        when that is more than 1 m from both lidars' positions given by the extrinsics."""
+        if float(values["surface_depth"]) <= 0:
+            return
+        viewpoint = np.asarray(values["viewpoint"], dtype=np.float64)
+        lidars = [self._extrinsics[s].translation for s in SENSORS]
+        if min(float(np.linalg.norm(viewpoint - t)) for t in lidars) > 1.0:
+            where = ", ".join(
+                f"{s} {np.round(self._extrinsics[s].translation, 2).tolist()}" for s in SENSORS
+            )
+            self.get_logger().warning(
+                f"surface_depth is {values['surface_depth']} m but viewpoint "
+                f"{viewpoint.tolist()} is more than 1 m from the lidars ({where}): estimates "
+                "will be moved along the wrong line of sight; set viewpoint to the lidars' "
+                "position in the output frame"
+            )
+
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         changes: dict[str, Any] = {}
         try:

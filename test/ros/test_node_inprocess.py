@@ -145,6 +145,37 @@ def test_invalid_start_parameter_is_a_parameter_error(rclpy_context):
         )
 
 
+def test_surface_depth_with_a_viewpoint_away_from_the_lidars_warns(rclpy_context, monkeypatch):
+    from rclpy.parameter import Parameter
+
+    from clusterfilter_ros.ros.node import DetectorNode
+
+    warnings: list[str] = []
+
+    class Logger:
+        def warning(self, msg, *args, **kwargs):
+            warnings.append(msg)
+
+        def __getattr__(self, name):
+            return lambda *args, **kwargs: None
+
+    monkeypatch.setattr(DetectorNode, "get_logger", lambda self: Logger())
+    rig = [50.0, 20.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+    for viewpoint, expect in (([0.0, 0.0, 0.0], True), ([50.0, 20.0, 0.5], False)):
+        warnings.clear()
+        node = DetectorNode(
+            context=rclpy_context,
+            parameter_overrides=[
+                Parameter("surface_depth", value=0.1),
+                Parameter("viewpoint", value=viewpoint),
+                Parameter("mid360_extrinsic", value=rig),
+                Parameter("avia_extrinsic", value=rig),
+            ],
+        )
+        node.destroy_node()
+        assert any("viewpoint" in w for w in warnings) is expect, warnings
+
+
 def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_for):
     from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.parameter import Parameter
