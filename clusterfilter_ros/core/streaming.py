@@ -147,7 +147,7 @@ class StreamingDetector:
         static_keys = voxel.voxel_keys(xyz, self.params.static_voxel)
         uk, inverse = np.unique(static_keys, return_inverse=True)
         inverse = inverse.reshape(-1)
-        self._pending.append(self._distinct_hits(uk, inverse, static_keys, t))
+        self._pending.append(self._distinct_hits(uk, static_keys, t))
         if self.params.static_suppression and self._static.size and xyz.shape[0]:
             # Points in voxels already known static never reach the local history.
             moving = (voxel.lookup(self._static, uk) < 0)[inverse]
@@ -211,7 +211,7 @@ class StreamingDetector:
         return dense[inverse.reshape(-1)]
 
     def _distinct_hits(
-        self, uk: np.ndarray, inverse: np.ndarray, keys: np.ndarray, t: np.ndarray
+        self, uk: np.ndarray, keys: np.ndarray, t: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """A frame's hits for the persistence map: one (voxel, time) per voxel when the
         whole frame falls in one ``static_bin`` (the map keeps one bit per voxel and

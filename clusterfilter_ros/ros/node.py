@@ -426,7 +426,8 @@ class DetectorNode(Node):
     # ---------------------------------------------------------------- parameters
     def _warn_if_viewpoint_is_off(self, values: Mapping[str, Any]) -> None:
         """``surface_depth`` pushes estimates away from ``viewpoint`` (output frame): warn
-        when that is more than 1 m from both lidars' positions given by the extrinsics."""
+        when that is more than 1 m from both lidars' positions given by the extrinsics
+        (at start-up and whenever one of them changes)."""
         if float(values["surface_depth"]) <= 0:
             return
         viewpoint = np.asarray(values["viewpoint"], dtype=np.float64)
@@ -487,6 +488,8 @@ class DetectorNode(Node):
                 if "path_length" in changes:
                     self._path = collections.deque(self._path, maxlen=changes["path_length"])
                 self._cond.notify_all()
+        if changes.keys() & {"surface_depth", "viewpoint", "avia_extrinsic", "mid360_extrinsic"}:
+            self._warn_if_viewpoint_is_off(self._values)
 
     # --------------------------------------------------------------- diagnostics
     def _publish_diagnostics(self) -> None:

@@ -172,8 +172,13 @@ def test_surface_depth_with_a_viewpoint_away_from_the_lidars_warns(rclpy_context
                 Parameter("avia_extrinsic", value=rig),
             ],
         )
-        node.destroy_node()
         assert any("viewpoint" in w for w in warnings) is expect, warnings
+        if not expect:
+            # A change at run time is checked too.
+            result = node.set_parameters([Parameter("viewpoint", value=[0.0, 0.0, 0.0])])
+            assert result[0].successful
+            assert any("viewpoint" in w for w in warnings), warnings
+        node.destroy_node()
 
 
 def test_diagnostics_stale_warn_ok_and_malformed(make_rig, small_sequence, wait_for):
