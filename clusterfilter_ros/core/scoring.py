@@ -307,10 +307,7 @@ def score_clusters(
             # Extent between the 10th and 90th percentiles per axis: a few returns of a
             # bird passing by must not stretch a hovering drone's cluster past the limit.
             core_extent = np.max(
-                [
-                    group_quantile(lab, pts[:, a], k, 0.9) - group_quantile(lab, pts[:, a], k, 0.1)
-                    for a in range(3)
-                ],
+                [np.subtract(*group_quantiles(lab, pts[:, a], k, (0.9, 0.1))) for a in range(3)],
                 axis=0,
             )
             hovering = (core_extent <= params.hover_max_extent) & (
@@ -498,19 +495,20 @@ def track_residual(
     rhs[~ok] = 0.0
     # Tiny ridge: windows whose points share few distinct times are near-singular.
     coef = np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)  # (m, 3 powers, 3 axes)
-    fitted = np.einsum("np,npa->na", powers, coef[inv])
-    sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
-    # Unbiased: the fit spends 3 degrees of freedom per axis.
-    rms = np.sqrt(np.bincount(inv, weights=sq, minlength=m) / np.maximum(n - 3.0, 1.0))
     if acceleration:
-        rms = 2.0 * np.linalg.norm(coef[:, 2, :], axis=1)
+        per_window = 2.0 * np.linalg.norm(coef[:, 2, :], axis=1)
+    else:
+        fitted = np.einsum("np,npa->na", powers, coef[inv])
+        sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
+        # Unbiased: the fit spends 3 degrees of freedom per axis.
+        per_window = np.sqrt(np.bincount(inv, weights=sq, minlength=m) / np.maximum(n - 3.0, 1.0))
     cluster = cw_u // n_win
     weight = np.bincount(cluster[ok], weights=n[ok], minlength=k)
     if acceleration:
         # Median over windows: one short, sparse window's fit is easily far off.
-        result = group_median(cluster[ok], rms[ok], k)
+        result = group_median(cluster[ok], per_window[ok], k)
     else:
-        total = np.bincount(cluster[ok], weights=(rms * n)[ok], minlength=k)
+        total = np.bincount(cluster[ok], weights=(per_window * n)[ok], minlength=k)
         result = np.where(weight > 0, total / np.maximum(weight, 1.0), 0.0)
     return (result, weight > 0) if evidence else result
 
@@ -523,7 +521,15 @@ def group_median(groups: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
 def group_quantile(groups: np.ndarray, values: np.ndarray, k: int, q: float) -> np.ndarray:
     """(K,) ``q`` quantile (linear interpolation) of ``values`` per group id 0..K-1 (0 for
     empty groups)."""
-    out = np.zeros(k)
+    return group_quantiles(groups, values, k, (q,))[0]
+
+
+def group_quantiles(
+    groups: np.ndarray, values: np.ndarray, k: int, qs: tuple[float, ...]
+) -> np.ndarray:
+    """(len(qs), K) quantiles of ``values`` per group id, from one sort (see
+    :func:`group_quantile`)."""
+    out = np.zeros((len(qs), k))
     if groups.size == 0:
         return out
     order = np.lexsort((values, groups))
@@ -531,11 +537,13 @@ def group_quantile(groups: np.ndarray, values: np.ndarray, k: int, q: float) -> 
     counts = np.bincount(g, minlength=k)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])
     has = counts > 0
-    pos = start[has] + q * (counts[has] - 1)
-    lo = np.floor(pos).astype(np.int64)
-    hi = np.minimum(lo + 1, start[has] + counts[has] - 1)
-    frac = pos - lo
-    out[has] = v[lo] * (1.0 - frac) + v[hi] * frac
+    last = start[has] + counts[has] - 1
+    for row, q in zip(out, qs, strict=True):
+        pos = start[has] + q * (counts[has] - 1)
+        lo = np.floor(pos).astype(np.int64)
+        hi = np.minimum(lo + 1, last)
+        frac = pos - lo
+        row[has] = v[lo] * (1.0 - frac) + v[hi] * frac
     return out
 
 
