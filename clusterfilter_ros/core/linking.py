@@ -244,12 +244,13 @@ def extend_track(
     take (noise and clusters too small to be scored alone). Step by step, the pool points
     of the next frame beyond the track's end within the linking reach of its end state
     (:func:`link_fragments`) join it and the end state is refitted; the same backwards
-    from its start. Returns the new member mask.
+    from its start. The next frame may be up to ``extend_max_gap`` (at most
+    ``link_max_gap``) beyond the end: a fast pass far away leaves returns 1-1.5 s apart.
+    Returns the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
-    # A track grows across gaps the trajectory itself bridges (max_gap), not further.
-    gap = min(float(params.link_max_gap), float(params.max_gap))
+    gap = min(float(params.link_max_gap), float(params.extend_max_gap))
     if gap <= 0 or not member.any() or not pool.any():
         return member
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)

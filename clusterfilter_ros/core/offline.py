@@ -169,6 +169,8 @@ def detect_offline(
                 max_extrapolation=params.max_extrapolation,
                 bin_seconds=params.frame_period / 2,
                 confidence=np.full(int(np.count_nonzero(labels == c)), scores.confidence[c]),
+                context_gap=float(params.link_max_gap),
+                context_window=float(params.link_fit_window),
             )
             for c in selected
         ],

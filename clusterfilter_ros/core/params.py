@@ -430,6 +430,15 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "extend_max_gap",
+        "float",
+        1.5,
+        "Offline: longest time gap (s) across which a selected track grows at its ends "
+        "by returns lying where it was heading (at most link_max_gap); 0 = no growth.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "voxel_size",
         "float",
         0.2,

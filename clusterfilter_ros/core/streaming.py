@@ -43,6 +43,7 @@ from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
+from clusterfilter_ros.core.trajectory import weighted_line
 
 #: Parameters whose change invalidates the accumulated state (voxel keys, filtering).
 _STRUCTURAL = {
@@ -394,14 +395,9 @@ class StreamingDetector:
         ps = np.array([s.position for s in samples])
         ws = np.array([float(s.points.shape[0]) for s in samples])
         n = int(ws.sum())
-        mean = np.average(ps, axis=0, weights=ws)
-        slope = np.zeros(3)
-        tc = float(np.average(ts, weights=ws))
-        if ts.size >= 2 and ts[-1] - ts[0] >= 2 * p.frame_period:
-            dt = ts - tc
-            slope = (ws[:, None] * dt[:, None] * (ps - mean)).sum(axis=0) / float(
-                np.sum(ws * dt * dt)
-            )
+        slope, mean, tc = weighted_line(ts, ps, ws)
+        if ts[-1] - ts[0] < 2 * p.frame_period:
+            slope = np.zeros(3)  # too short a span for a velocity
         age, speed = stamp - last, float(np.linalg.norm(slope))
         if ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= 2 * p.frame_period:
             # A well-sampled, fresh track: a quadratic follows a turn or a change of speed

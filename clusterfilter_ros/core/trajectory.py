@@ -6,6 +6,10 @@ consecutive samples are more than ``max_gap`` seconds apart. Each segment with a
 five samples gets a cubic smoothing B-spline per axis
 (:func:`scipy.interpolate.make_smoothing_spline`, smoothing chosen by generalised
 cross-validation); shorter segments get a weighted straight line (or a constant).
+With ``context_gap`` set (offline: ``link_max_gap``, as all samples belong to one
+linked track), a short segment's line is fitted through its neighbours' nearest
+``context_window`` seconds as well, when they are at most ``context_gap`` away: one or
+two returns after a gap then move on with the track's velocity instead of standing still.
 Positions are defined only inside a segment's span widened by ``max_extrapolation``
 seconds at each end (linear continuation there); elsewhere the answer is NaN.
 """
@@ -32,6 +36,22 @@ def time_samples(
     tm = np.bincount(inv, weights=t) / counts
     pos = np.stack([np.bincount(inv, weights=xyz[:, a]) / counts for a in range(3)], axis=1)
     return tm, pos, counts.astype(np.float64)
+
+
+def weighted_line(
+    t: np.ndarray, xyz: np.ndarray, w: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Weighted least-squares straight line through samples (t (S,), xyz (S, 3), weights
+    (S,)): (velocity (3,), weighted mean position (3,), weighted mean time); the position
+    at time ``x`` is ``mean + (x - tc) * velocity``. Zero velocity if all ``t`` are equal."""
+    tc = float(np.average(t, weights=w))
+    dt = t - tc
+    mean = np.average(xyz, axis=0, weights=w)
+    denom = float(np.sum(w * dt * dt))
+    if denom <= 0:
+        return np.zeros(3), mean, tc
+    slope = (w[:, None] * dt[:, None] * (xyz - mean)).sum(axis=0) / denom
+    return slope, mean, tc
 
 
 @dataclass
@@ -120,11 +140,17 @@ def fit_trajectory(
     max_extrapolation: float,
     bin_seconds: float = 0.05,
     confidence: np.ndarray | None = None,
+    context_gap: float = 0.0,
+    context_window: float = 1.0,
 ) -> Trajectory | None:
     """Fit a :class:`Trajectory` to drone points (t (N,), xyz (N, 3)); None if no points.
 
     ``confidence`` (N,) optional per-point confidence; a segment's confidence is the
-    point-weighted mean over its points.
+    point-weighted mean over its points. ``context_gap`` (s, 0 = off) and
+    ``context_window`` (s): a segment of fewer than five samples is a straight line
+    through its own samples and those of the neighbouring segments' nearest
+    ``context_window`` seconds, for neighbours at most ``context_gap`` away (see the
+    module docstring); its span stays its own.
     """
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
@@ -139,10 +165,27 @@ def fit_trajectory(
     _, cs, _ = time_samples(t, np.repeat(conf_pts[:, None], 3, axis=1), bin_seconds)
     cs = cs[:, 0]
     breaks = np.nonzero(np.diff(ts) > max_gap)[0] + 1
+    groups = np.split(np.arange(ts.size), breaks)
     segments = []
-    for idx in np.split(np.arange(ts.size), breaks):
+    for g, idx in enumerate(groups):
         st, sp, sw, sc = ts[idx], ps[idx], ws[idx], cs[idx]
         conf = float(np.average(sc, weights=sw))
+        if context_gap > 0 and st.size < 5:
+            # A short piece of a longer track: its line also goes through the nearest
+            # context_window of the neighbouring pieces (same object, within context_gap),
+            # so that one or two returns after a gap move on with the track's velocity.
+            extra = []
+            if g > 0 and st[0] - ts[groups[g - 1][-1]] <= context_gap:
+                prev = groups[g - 1]
+                extra.append(prev[ts[prev] >= ts[prev[-1]] - context_window])
+            if g + 1 < len(groups) and ts[groups[g + 1][0]] - st[-1] <= context_gap:
+                nxt = groups[g + 1]
+                extra.append(nxt[ts[nxt] <= ts[nxt[0]] + context_window])
+            if extra:
+                ctx = np.concatenate([idx, *extra])
+                model = weighted_line(ts[ctx], ps[ctx], ws[ctx])
+                segments.append(_Segment(st[0], st[-1], "line", model, conf, st.size))
+                continue
         if st.size >= 5 and st[-1] - st[0] > 0:
             splines = []
             for a in range(3):
@@ -155,12 +198,9 @@ def fit_trajectory(
                 segments.append(_Segment(st[0], st[-1], "spline", splines, conf, st.size))
                 continue
         if st.size >= 2 and st[-1] - st[0] > 0:
-            tc = float(np.average(st, weights=sw))
-            dt = st - tc
-            denom = float(np.sum(sw * dt * dt))
-            mean = np.average(sp, axis=0, weights=sw)
-            slope = (sw[:, None] * dt[:, None] * (sp - mean)).sum(axis=0) / denom
-            segments.append(_Segment(st[0], st[-1], "line", (slope, mean, tc), conf, st.size))
+            segments.append(
+                _Segment(st[0], st[-1], "line", weighted_line(st, sp, sw), conf, st.size)
+            )
         else:
             mean = np.average(sp, axis=0, weights=sw)
             segments.append(_Segment(st[0], st[-1], "constant", mean, conf, st.size))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clusterfilter_ros.core.trajectory import fit_trajectory, time_samples
+from clusterfilter_ros.core.trajectory import fit_trajectory, time_samples, weighted_line
 
 
 def test_time_samples_average_per_bin():
@@ -81,3 +81,29 @@ def test_reported_positions_apply_surface_depth_then_target_offset():
     assert np.allclose(out[2], [1.0, 1.0, 1.25])
     # Off by default: the offset alone.
     assert np.allclose(reported_positions(centres, detector_params()), centres)
+
+
+def test_a_short_piece_after_a_gap_moves_with_its_neighbours_velocity():
+    # A track at 8 m/s for 2 s, then one return 1.3 s after its end.
+    t = np.concatenate([np.arange(0.0, 2.0, 0.1), [3.2]])
+    xyz = np.column_stack([8.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])
+    alone = fit_trajectory(t, xyz, max_gap=1.0, max_extrapolation=0.3)
+    assert alone.segments[-1].kind == "constant"
+    with_ctx = fit_trajectory(t, xyz, max_gap=1.0, max_extrapolation=0.3, context_gap=2.0)
+    assert [s.kind for s in with_ctx.segments] == ["spline", "line"]
+    pos = with_ctx(np.array([3.0, 3.4]))
+    assert np.allclose(pos[:, 0], [24.0, 27.2], atol=0.05)
+    # Spans stay their own: nothing inside the gap.
+    assert np.isnan(with_ctx(np.array([2.6]))).all()
+    # A neighbour further than context_gap gives no context.
+    far = fit_trajectory(t, xyz, max_gap=1.0, max_extrapolation=0.3, context_gap=1.0)
+    assert far.segments[-1].kind == "constant"
+
+
+def test_weighted_line_recovers_a_line_and_handles_one_instant():
+    t = np.array([0.0, 1.0, 2.0])
+    xyz = np.array([[0.0, 1, 2], [2, 1, 2], [4, 1, 2]])
+    slope, mean, tc = weighted_line(t, xyz, np.array([1.0, 2.0, 1.0]))
+    assert np.allclose(slope, [2, 0, 0]) and np.isclose(tc, 1.0) and np.allclose(mean, [2, 1, 2])
+    slope, mean, _ = weighted_line(np.zeros(2), xyz[:2], np.ones(2))
+    assert np.allclose(slope, 0) and np.allclose(mean, [1, 1, 2])

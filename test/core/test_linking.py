@@ -251,3 +251,18 @@ def test_track_growth_does_not_take_a_scored_and_rejected_cluster():
     out = extend_selected(labels, xyz, t, scores, [0], params)
     assert out[-1] == 0  # the lone return joins
     assert (out[track_t.size : -1] == 1).all()  # the rejected cluster does not
+
+
+def test_extend_track_crosses_gaps_up_to_extend_max_gap():
+    rng = np.random.default_rng(8)
+    xyz, t, _ = _fragments(rng, [0.0], length=1.0)  # last frame at 0.9 s
+    lone_t = np.array([2.2])  # 1.3 s later, where the track was heading
+    all_xyz = np.concatenate([xyz, [[8.0 * 2.2, 0.0, 20.0]]])
+    all_t = np.concatenate([t, lone_t])
+    member = np.concatenate([np.ones(t.size, bool), [False]])
+    grown = extend_track(member, all_xyz, all_t, ~member, detector_params())
+    assert grown[-1]
+    short = detector_params({"extend_max_gap": 1.0})
+    assert not extend_track(member, all_xyz, all_t, ~member, short)[-1]
+    off = detector_params({"extend_max_gap": 0.0})
+    assert np.array_equal(extend_track(member, all_xyz, all_t, ~member, off), member)
