@@ -167,8 +167,18 @@ def evaluate(
 
 
 def _gt_at(gt: TimedPositions, stamps: np.ndarray, max_gap: float) -> np.ndarray:
-    """Ground truth interpolated at prediction stamps by the same matching rule."""
-    return interpolate_predictions(gt, stamps, max_gap)
+    """Ground truth at prediction stamps by the same matching rule; a stamp at most
+    ``max_gap`` before the first (after the last) GT sample gets that sample, so that a
+    prediction made just before the ground truth starts is not counted as wrong."""
+    stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+    out = interpolate_predictions(gt, stamps, max_gap)
+    if len(gt):
+        first, last = gt.stamps[0], gt.stamps[-1]
+        before = (stamps < first) & (first - stamps <= max_gap)
+        after = (stamps > last) & (stamps - last <= max_gap)
+        out[before] = gt.xyz[0]
+        out[after] = gt.xyz[-1]
+    return out
 
 
 def observable_mask(

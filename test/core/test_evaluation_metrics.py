@@ -71,3 +71,13 @@ def test_drone_free_false_alarms():
     assert math.isnan(r.coverage) and r.as_dict()["rmse"] is None
     quiet = evaluate(tp(np.empty(0), np.empty((0, 3))), empty_gt, duration=20.0)
     assert quiet.false_alarm_seconds == 0.0 and quiet.false_alarm_fraction == 0.0
+
+
+def test_false_alarms_near_the_ends_of_the_ground_truth():
+    gt = tp([1.0, 1.1, 1.2], [[0, 0, 10], [0.1, 0, 10], [0.2, 0, 10]])
+    # Just before / after the GT, on the drone: not a false alarm.
+    near = evaluate(tp([0.95, 1.0, 1.25], [[0, 0, 10], [0, 0, 10], [0.2, 0, 10]]), gt)
+    assert near.false_alarm_seconds == 0.0
+    # Just before the GT but 5 m off, and long before it: both are false alarms.
+    off = evaluate(tp([0.0, 0.95], [[0, 0, 10], [5, 0, 10]]), gt, duration=10.0)
+    assert off.false_alarm_seconds == pytest.approx(0.3 + 0.3)
