@@ -96,14 +96,21 @@ def cluster_labels(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarr
     return voxel_cluster_points(xyz, params.cluster_voxel, params.min_samples)
 
 
-def global_clusters(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> tuple[np.ndarray, int]:
+def global_clusters(
+    xyz: np.ndarray, t: np.ndarray, params: ParamSet, passes: int | None = None
+) -> tuple[np.ndarray, int]:
     """Compact cluster labels (0..K-1, -1 noise) and K: clustering, the merge of a hovering
-    drone's co-located pieces (``hover_detection``), then track linking (``link_max_gap``)."""
+    drone's co-located pieces (``hover_detection``), then track linking (``link_max_gap``)
+    in up to ``passes`` rounds (default ``link_passes``), until a round links nothing."""
     labels, k = relabel_compact(cluster_labels(xyz, t, params))
     if params.hover_detection:
         labels, k = merge_colocated_compact(labels, xyz, params.hover_max_extent)
     if params.link_max_gap > 0:
-        labels, k = link_fragments(labels, xyz, t, params)
+        for _ in range(int(params.link_passes if passes is None else passes)):
+            before = k
+            labels, k = link_fragments(labels, xyz, t, params)
+            if k == before:
+                break
     return labels, k
 
 

@@ -430,6 +430,25 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "link_passes",
+        "int",
+        4,
+        "Offline track linking: rounds of linking, until nothing more links; in the "
+        "second and later rounds whole chains link by their own end states (a "
+        "single-frame fragment at a chain's end has no velocity, its chain has).",
+        minimum=1,
+        maximum=20,
+    ),
+    ParamSpec(
+        "stream_link_passes",
+        "int",
+        1,
+        "Streaming: link_passes for the local history (more rounds join more short bird "
+        "legs into chains long enough to look coherent).",
+        minimum=1,
+        maximum=20,
+    ),
+    ParamSpec(
         "extend_max_gap",
         "float",
         1.5,

@@ -258,7 +258,7 @@ class StreamingDetector:
             xyz = np.concatenate([c.xyz for c in self._chunks])
             t = np.concatenate([c.t for c in self._chunks])
             self._foreground_points = int(t.size)
-            labels, k = global_clusters(xyz, t, p)
+            labels, k = global_clusters(xyz, t, p, passes=p.stream_link_passes)
             self._clusters = k
             if k:
                 # Windows aligned to the stream's first stamp (deterministic), unless the

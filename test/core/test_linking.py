@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragments
+from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import group_median, score_clusters
 
@@ -266,3 +267,20 @@ def test_extend_track_crosses_gaps_up_to_extend_max_gap():
     assert not extend_track(member, all_xyz, all_t, ~member, short)[-1]
     off = detector_params({"extend_max_gap": 0.0})
     assert np.array_equal(extend_track(member, all_xyz, all_t, ~member, off), member)
+
+
+def test_later_linking_rounds_join_chains_by_their_own_end_states():
+    # A 1 s track, then single-frame returns 0.4 s and 0.9 s after it: the first joins
+    # the track in round one; the second is one frame after a one-frame fragment (no
+    # velocity on either side) and joins only once the chain's end state is used.
+    rng = np.random.default_rng(9)
+    xyz, t, lab = _fragments(rng, [0.0, 1.3, 1.8], length=1.0)
+    single = (lab == 0) | (t == 1.3) | (t == 1.8)
+    xyz, t, lab = xyz[single], t[single], lab[single]
+    one, k1 = global_clusters(xyz, t, detector_params({"link_passes": 1}))
+    assert k1 == 2
+    out, k = global_clusters(xyz, t, detector_params())
+    assert k == 1 and (out == 0).all()
+    # Streaming keeps to one round unless told otherwise.
+    _, k_stream = global_clusters(xyz, t, detector_params(), passes=1)
+    assert k_stream == 2
