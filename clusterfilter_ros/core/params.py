@@ -222,8 +222,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "mid360_min_z",
         "float",
-        1.0,
-        "Mid360 points at or below this height (m, output frame) are dropped as ground clutter.",
+        0.0,
+        "Mid360 points at or below this height (m, output frame) are dropped as ground "
+        "clutter; 0 is the Mid360's own height when the frame's origin is the Mid360, as "
+        "in MMAUD and the simulator (1.75 m above the ground there).",
         minimum=-50.0,
         maximum=100.0,
     ),

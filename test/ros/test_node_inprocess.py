@@ -70,14 +70,14 @@ def test_extrinsic_moves_poses(make_rig, small_sequence, wait_for):
         sync_timeout=1.0,
         avia_extrinsic=shift + [0.0, 0.0, 0.0, 1.0],
         mid360_extrinsic=shift + [0.0, 0.0, 0.0, 1.0],
-        mid360_min_z=4.5,  # the ground moved up by 1 m with the shift
+        mid360_min_z=1.0,  # the default (0) moved up by 1 m with the shift
     )
     replay_and_wait(rig, frames, len(frames), wait_for)
     shifted = [
         dataclasses.replace(f, xyz=(f.xyz.astype(np.float64) + shift).astype(np.float32))
         for f in frames
     ]
-    expected = run_streaming(shifted, detector_params({"mid360_min_z": 4.5}))
+    expected = run_streaming(shifted, detector_params({"mid360_min_z": 1.0}))
     assert wait_for(lambda: len(rig.recorder) >= len(expected), 10.0)
     got = rig.recorder.positions()
     assert len(got) == len(expected) > 0
