@@ -333,6 +333,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100000,
     ),
     ParamSpec(
+        "hover_keep_frames",
+        "int",
+        15,
+        "Streaming: a hovering track being reported stays reported while its cluster has "
+        "this many frames with points (hysteresis with keep_confidence; a new one needs "
+        "hover_min_frames); values >= hover_min_frames switch this off.",
+        minimum=1,
+        maximum=100000,
+    ),
+    ParamSpec(
         "warmup",
         "float",
         3.0,

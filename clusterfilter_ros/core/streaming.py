@@ -282,7 +282,21 @@ class StreamingDetector:
                     self._carry_over(old_track)
                     self._catch_up()
                 elif previous is not None and p.keep_confidence < p.min_confidence:
-                    self._keep_track(previous[0], scores, labels, xyz, t)
+                    kept = self._keep_track(previous[0], scores, labels, xyz, t)
+                    if not kept and p.hover_detection and p.hover_keep_frames < p.hover_min_frames:
+                        # A hovering drone 10-20 m away leaves about as many frames in the
+                        # history as hover_min_frames asks: once reported, fewer suffice.
+                        relaxed = p.copy(hover_min_frames=p.hover_keep_frames)
+                        rescored = score_clusters(
+                            labels,
+                            xyz,
+                            t,
+                            relaxed,
+                            n_clusters=k,
+                            t0=t0,
+                            min_track_seconds=p.stream_min_track_seconds,
+                        )
+                        self._keep_track(previous[0], rescored, labels, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
@@ -295,21 +309,24 @@ class StreamingDetector:
         labels: np.ndarray,
         xyz: np.ndarray,
         t: np.ndarray,
-    ) -> None:
+    ) -> bool:
         """Hysteresis: continue the reported track with the cluster that holds its recent
-        points, if that cluster passes the gates and has at least ``keep_confidence``."""
+        points, if that cluster passes the gates and has at least ``keep_confidence``;
+        True if it did."""
         p = self.params
         recent = (t >= self._now - p.track_window) & (labels >= 0)
         near = recent & (
             np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= p.track_gate**2
         )
         if not near.any():
-            return
+            return False
         c = int(np.bincount(labels[near]).argmax())
         if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
             # Reported at min_confidence: the track was confirmed, its evidence is weaker now.
             self._selected_conf = float(p.min_confidence)
             self._rebuild_track(labels == c, xyz, t)
+            return True
+        return False
 
     def _carry_over(self, old_track: list[_TrackSample]) -> None:
         """Re-append samples the previous track had gathered between re-clusterings (gated

@@ -224,3 +224,38 @@ def test_persistence_map_is_the_same_with_one_hit_per_voxel_and_bin():
             pending_keys, pending_t, last = [], [], stamp
     assert np.array_equal(det._background.keys, raw.keys)
     assert np.array_equal(det._background.masks, raw.masks)
+
+
+def _hover_frames(duration: float = 30.0, thin_after: float = 15.0) -> list[Frame]:
+    """Mid360 frames of a wall and a drone hovering at one spot, seen every 0.5 s (20
+    frames in the 10 s history), every 0.7 s after ``thin_after`` (14-15 frames)."""
+    rng = np.random.default_rng(0)
+    frames, next_hit = [], 0.0
+    for i in range(int(duration * 10)):
+        t = i * 0.1
+        wall = np.column_stack(
+            [
+                np.full(400, 40.0) + rng.normal(0, 0.02, 400),
+                rng.uniform(-20, 20, 400),
+                rng.uniform(0, 15, 400),
+            ]
+        )
+        parts = [wall]
+        if t >= next_hit - 1e-9:
+            parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, 0.05, (3, 3)))
+            next_hit += 0.5 if t < thin_after else 0.7
+        frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
+    return frames
+
+
+def test_a_reported_hovering_drone_needs_only_hover_keep_frames_to_stay_reported():
+    frames = _hover_frames()
+    kept = [e.stamp - 1000.0 for e in run_streaming(frames)]
+    off = [
+        e.stamp - 1000.0 for e in run_streaming(frames, detector_params({"hover_keep_frames": 20}))
+    ]
+    assert min(kept) == min(off) < 15.0  # found once it has hover_min_frames (20)
+    assert max(off) < 20.0  # without the hysteresis, lost as the returns thin out
+    assert sum(s > 20.0 for s in kept) > 30  # with it, still reported
+    for e in run_streaming(frames):
+        assert np.linalg.norm(e.position - [12.0, 6.0, 15.0]) < 0.5
