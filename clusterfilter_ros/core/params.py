@@ -664,6 +664,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "accel_phases",
+        "int",
+        8,
+        "Normalized scoring: the acceleration windows are laid at this many offsets, "
+        "accel_window / accel_phases apart, and the median is taken over all of them (a "
+        "sliding window in effect: where a window edge falls does not decide); 1 = one grid.",
+        minimum=1,
+        maximum=16,
+    ),
+    ParamSpec(
         "smooth_accel",
         "float",
         4.0,

@@ -320,7 +320,14 @@ def score_clusters(
             res.normalized_score = np.where(hovering, 1.0, res.normalized_score)
         res.residual = multiscale_residual(lab, pts, tt, k, float(params.residual_window), origin)
         res.acceleration = multiscale_residual(
-            lab, pts, tt, k, float(params.accel_window), origin, acceleration=True
+            lab,
+            pts,
+            tt,
+            k,
+            float(params.accel_window),
+            origin,
+            acceleration=True,
+            phases=int(params.accel_phases),
         )
         # The part of the residual not explained by the object's own spread in one frame
         # (body size, range noise, motion within the frame): a sparse bird's few points
@@ -436,6 +443,7 @@ def track_residual(
     evidence: bool = False,
     acceleration: bool = False,
     min_span: float | None = None,
+    phases: int = 1,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Per cluster: RMS 3D residual (m) of a quadratic fit of position against time.
 
@@ -447,11 +455,50 @@ def track_residual(
     cluster's windows, 0 for clusters without such a window (no evidence either way).
     An acceleration-limited drone leaves only its body size and range noise (simulation:
     0.07-0.39 m); an erratic bird or a swaying branch leaves much more.
+
+    ``acceleration``: instead, the median over a cluster's windows of the fitted
+    acceleration's magnitude (twice the quadratic coefficient), with the windows laid at
+    ``phases`` offsets ``window / phases`` apart (all of them pooled). Where a window edge
+    falls is arbitrary, and a sparse track's few frames can fit a large acceleration in one
+    window and a small one in the window shifted by a fraction of a second; the pooled
+    median is that of a sliding window, in effect.
     """
     out = np.zeros(k)
     none = np.zeros(k, dtype=bool)
     if lab.size == 0:
         return (out, none) if evidence else out
+    n_phase = max(1, int(phases)) if acceleration else 1
+    parts = [
+        _window_fits(lab, pts, t, window, t0 - i * window / n_phase, acceleration, min_span)
+        for i in range(n_phase)
+    ]
+    cluster = np.concatenate([c for c, _, _ in parts])
+    if cluster.size == 0:
+        return (out, none) if evidence else out
+    values = np.concatenate([v for _, v, _ in parts])
+    counts = np.concatenate([n for _, _, n in parts])
+    weight = np.bincount(cluster, weights=counts, minlength=k)
+    if acceleration:
+        # Median over windows: one short, sparse window's fit is easily far off.
+        result = group_median(cluster, values, k)
+    else:
+        total = np.bincount(cluster, weights=values * counts, minlength=k)
+        result = np.where(weight > 0, total / np.maximum(weight, 1.0), 0.0)
+    return (result, weight > 0) if evidence else result
+
+
+def _window_fits(
+    lab: np.ndarray,
+    pts: np.ndarray,
+    t: np.ndarray,
+    window: float,
+    t0: float,
+    acceleration: bool,
+    min_span: float | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (cluster, window) quadratic fits of :func:`track_residual` for one window grid:
+    (cluster id, residual or acceleration, point count) per window with enough evidence."""
+    empty = (np.empty(0, np.int64), np.empty(0), np.empty(0))
     t_min = float(t.min())
     rel = t - t_min
     span = float(rel.max()) / window
@@ -459,7 +506,7 @@ def track_residual(
     if not (math.isfinite(span) and span < 1e9 and 0.0 <= offset < 1e9):
         offset = 0.0  # stamps far from t0: windows aligned to the first point instead
         if not (math.isfinite(span) and span < 1e9):
-            return (out, none) if evidence else out  # absurd time spans: no evidence
+            return empty  # absurd time spans: no evidence
     win = np.floor(rel / window + (offset % 1.0) + 1e-9).astype(np.int64)
     n_win = int(win.max()) + 1
     cw_u, inv = np.unique(lab * n_win + win, return_inverse=True)
@@ -490,7 +537,7 @@ def track_residual(
     n_instants = np.bincount(instants // stride, minlength=m)
     ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed) & (n_instants >= 3)
     if not ok.any():
-        return (out, none) if evidence else out
+        return empty
     gram[~ok] = np.eye(3)
     rhs[~ok] = 0.0
     # Tiny ridge: windows whose points share few distinct times are near-singular.
@@ -502,15 +549,7 @@ def track_residual(
         sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
         # Unbiased: the fit spends 3 degrees of freedom per axis.
         per_window = np.sqrt(np.bincount(inv, weights=sq, minlength=m) / np.maximum(n - 3.0, 1.0))
-    cluster = cw_u // n_win
-    weight = np.bincount(cluster[ok], weights=n[ok], minlength=k)
-    if acceleration:
-        # Median over windows: one short, sparse window's fit is easily far off.
-        result = group_median(cluster[ok], per_window[ok], k)
-    else:
-        total = np.bincount(cluster[ok], weights=(per_window * n)[ok], minlength=k)
-        result = np.where(weight > 0, total / np.maximum(weight, 1.0), 0.0)
-    return (result, weight > 0) if evidence else result
+    return (cw_u // n_win)[ok], per_window[ok], n[ok]
 
 
 def group_median(groups: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
@@ -559,6 +598,7 @@ def multiscale_residual(
     window: float,
     t0: float,
     acceleration: bool = False,
+    phases: int = 1,
 ) -> np.ndarray:
     """:func:`track_residual` at ``window``; clusters too sparse for any window there are
     measured with windows 2x and then 4x as long (a sparse track's few returns per
@@ -573,7 +613,16 @@ def multiscale_residual(
         if not sel.any():
             break
         r, has = track_residual(
-            lab[sel], pts[sel], t[sel], k, scale * window, t0, True, acceleration, 0.5 * window
+            lab[sel],
+            pts[sel],
+            t[sel],
+            k,
+            scale * window,
+            t0,
+            True,
+            acceleration,
+            0.5 * window,
+            phases,
         )
         take = todo & has
         out[take] = r[take]
