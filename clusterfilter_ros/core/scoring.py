@@ -318,11 +318,17 @@ def score_clusters(
             # Staying in place is what lowers R and raises IoU, so a hovering candidate
             # is scored by its compactness and support alone.
             res.normalized_score = np.where(hovering, 1.0, res.normalized_score)
-        res.residual = multiscale_residual(lab, pts, tt, k, float(params.residual_window), origin)
+        # Smoothness and acceleration only for clusters that pass the gates: the others
+        # cannot be selected, and the walls and crowns among them hold most of the points.
+        gated = _gates(res, counts, params)[lab]
+        g_lab, g_pts, g_t = lab[gated], pts[gated], tt[gated]
+        res.residual = multiscale_residual(
+            g_lab, g_pts, g_t, k, float(params.residual_window), origin
+        )
         res.acceleration = multiscale_residual(
-            lab,
-            pts,
-            tt,
+            g_lab,
+            g_pts,
+            g_t,
             k,
             float(params.accel_window),
             origin,
@@ -361,7 +367,14 @@ def score_clusters(
             duration = np.where(counts > 0, res.t_last - res.t_first, 0.0)
             support = support * np.clip(duration / confirm, 0.0, 1.0)
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
-    res.candidate = (
+    res.candidate = _gates(res, counts, params)
+    return res
+
+
+def _gates(res: ClusterScores, counts: np.ndarray, params: ParamSet) -> np.ndarray:
+    """(K,) bool: the candidate gates (size, height, volume, extent; local extent in
+    normalized scoring), from the features computed before any scoring."""
+    ok = (
         (res.n_points >= params.min_cluster_points)
         & (res.n_points <= params.max_cluster_points)
         & (res.centroid[:, 2] >= params.min_centroid_z)
@@ -370,8 +383,8 @@ def score_clusters(
         & (counts > 0)
     )
     if params.scoring != "paper":
-        res.candidate &= res.local_extent <= params.max_local_extent
-    return res
+        ok &= res.local_extent <= params.max_local_extent
+    return ok
 
 
 def motion_coherence(
@@ -469,7 +482,7 @@ def track_residual(
         return (out, none) if evidence else out
     n_phase = max(1, int(phases)) if acceleration else 1
     parts = [
-        _window_fits(lab, pts, t, window, t0 - i * window / n_phase, acceleration, min_span)
+        _window_fits(lab, pts, t, window, t0 - i * window / n_phase, acceleration, min_span, t0)
         for i in range(n_phase)
     ]
     cluster = np.concatenate([c for c, _, _ in parts])
@@ -495,9 +508,13 @@ def _window_fits(
     t0: float,
     acceleration: bool,
     min_span: float | None,
+    instant_origin: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The (cluster, window) quadratic fits of :func:`track_residual` for one window grid:
-    (cluster id, residual or acceleration, point count) per window with enough evidence."""
+    (cluster id, residual or acceleration, point count) per window with enough evidence.
+    Distinct instants are counted on a 0.05 s grid from ``instant_origin`` (the same for
+    every window grid and every subset of clusters), or from the first point if that is
+    absurdly far."""
     empty = (np.empty(0, np.int64), np.empty(0), np.empty(0))
     t_min = float(t.min())
     rel = t - t_min
@@ -533,7 +550,10 @@ def _window_fits(
     # Three distinct instants at least (0.05 s apart): points from two frames only fit a
     # line exactly, and their quadratic term is unbounded.
     stride = int(span * window / 0.05) + 2  # more 0.05 s instants than the data spans
-    instants = np.unique(inv * stride + np.floor(rel / 0.05).astype(np.int64))
+    lead = t_min - instant_origin if math.isfinite(t_min - instant_origin) else -1.0
+    tick = np.floor((rel + lead) / 0.05) if 0.0 <= lead < 1e6 else np.floor(rel / 0.05)
+    tick = tick.astype(np.int64)
+    instants = np.unique(inv * stride + tick - int(tick.min()))
     n_instants = np.bincount(instants // stride, minlength=m)
     ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed) & (n_instants >= 3)
     if not ok.any():
