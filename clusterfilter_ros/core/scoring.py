@@ -481,6 +481,9 @@ def track_residual(
     if lab.size == 0:
         return (out, none) if evidence else out
     n_phase = max(1, int(phases)) if acceleration else 1
+    # Sorted by cluster, then time: each window grid's windows are then runs of points.
+    order = np.lexsort((t, lab))
+    lab, pts, t = lab[order], pts[order], t[order]
     parts = [
         _window_fits(lab, pts, t, window, t0 - i * window / n_phase, acceleration, min_span, t0)
         for i in range(n_phase)
@@ -512,6 +515,7 @@ def _window_fits(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The (cluster, window) quadratic fits of :func:`track_residual` for one window grid:
     (cluster id, residual or acceleration, point count) per window with enough evidence.
+    The points must be sorted by cluster, then time.
     Distinct instants are counted on a 0.05 s grid from ``instant_origin`` (the same for
     every window grid and every subset of clusters), or from the first point if that is
     absurdly far."""
@@ -526,10 +530,15 @@ def _window_fits(
             return empty  # absurd time spans: no evidence
     win = np.floor(rel / window + (offset % 1.0) + 1e-9).astype(np.int64)
     n_win = int(win.max()) + 1
-    cw_u, inv = np.unique(lab * n_win + win, return_inverse=True)
-    inv = inv.reshape(-1)
+    key = lab * n_win + win  # non-decreasing: sorted by cluster, then time
+    first = np.empty(key.size, dtype=bool)
+    first[0] = True
+    np.not_equal(key[1:], key[:-1], out=first[1:])
+    starts = np.flatnonzero(first)
+    inv = np.cumsum(first) - 1
+    cw_u = key[starts]
     m = cw_u.size
-    n = np.bincount(inv, minlength=m).astype(np.float64)
+    n = np.diff(np.append(starts, key.size)).astype(np.float64)
     centre = np.bincount(inv, weights=rel, minlength=m) / n
     s = rel - centre[inv]  # time relative to the window's mean time (conditioning)
     powers = np.stack([np.ones_like(s), s, s * s], axis=1)  # (N, 3)
@@ -542,19 +551,18 @@ def _window_fits(
             )
         for a in range(3):
             rhs[:, i, a] = np.bincount(inv, weights=powers[:, i] * pts[:, a], minlength=m)
-    t_lo = np.full(m, np.inf)
-    t_hi = np.full(m, -np.inf)
-    np.minimum.at(t_lo, inv, rel)
-    np.maximum.at(t_hi, inv, rel)
+    t_lo = rel[starts]
+    t_hi = rel[np.append(starts[1:], key.size) - 1]
     span_needed = 0.5 * window if min_span is None else float(min_span)
     # Three distinct instants at least (0.05 s apart): points from two frames only fit a
     # line exactly, and their quadratic term is unbounded.
-    stride = int(span * window / 0.05) + 2  # more 0.05 s instants than the data spans
     lead = t_min - instant_origin if math.isfinite(t_min - instant_origin) else -1.0
     tick = np.floor((rel + lead) / 0.05) if 0.0 <= lead < 1e6 else np.floor(rel / 0.05)
     tick = tick.astype(np.int64)
-    instants = np.unique(inv * stride + tick - int(tick.min()))
-    n_instants = np.bincount(instants // stride, minlength=m)
+    # Distinct instants per window: the ticks are non-decreasing within a window.
+    new_instant = first.copy()
+    new_instant[1:] |= tick[1:] != tick[:-1]
+    n_instants = np.bincount(inv[new_instant], minlength=m)
     ok = (n >= RESIDUAL_MIN_POINTS) & (t_hi - t_lo >= span_needed) & (n_instants >= 3)
     if not ok.any():
         return empty
