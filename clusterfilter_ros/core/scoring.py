@@ -320,7 +320,8 @@ def score_clusters(
             res.normalized_score = np.where(hovering, 1.0, res.normalized_score)
         # Smoothness and acceleration only for clusters that pass the gates: the others
         # cannot be selected, and the walls and crowns among them hold most of the points.
-        gated = _gates(res, counts, params)[lab]
+        res.candidate = _gates(res, counts, params)
+        gated = res.candidate[lab]
         g_lab, g_pts, g_t = lab[gated], pts[gated], tt[gated]
         res.residual = multiscale_residual(
             g_lab, g_pts, g_t, k, float(params.residual_window), origin
@@ -367,7 +368,7 @@ def score_clusters(
             duration = np.where(counts > 0, res.t_last - res.t_first, 0.0)
             support = support * np.clip(duration / confirm, 0.0, 1.0)
         res.confidence = np.clip(res.normalized_score * support, 0.0, 1.0)
-    res.candidate = _gates(res, counts, params)
+    # Without labelled points every cluster keeps the candidate flag False of _empty().
     return res
 
 
