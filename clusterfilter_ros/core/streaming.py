@@ -26,6 +26,7 @@ stamp, reported while the newest sample is at most ``max_extrapolation`` old
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections import deque
@@ -264,15 +265,16 @@ class StreamingDetector:
                 # Windows aligned to the stream's first stamp (deterministic), unless the
                 # stream's clock jumped so far that the offsets would not fit an int64.
                 t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
-                scores = score_clusters(
+                score = functools.partial(
+                    score_clusters,
                     labels,
                     xyz,
                     t,
-                    p,
                     n_clusters=k,
                     t0=t0,
                     min_track_seconds=p.stream_min_track_seconds,
                 )
+                scores = score(p)
                 chosen = select_clusters(scores, p)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.
@@ -286,17 +288,8 @@ class StreamingDetector:
                     if not kept and p.hover_detection and p.hover_keep_frames < p.hover_min_frames:
                         # A hovering drone 10-20 m away leaves about as many frames in the
                         # history as hover_min_frames asks: once reported, fewer suffice.
-                        relaxed = p.copy(hover_min_frames=p.hover_keep_frames)
-                        rescored = score_clusters(
-                            labels,
-                            xyz,
-                            t,
-                            relaxed,
-                            n_clusters=k,
-                            t0=t0,
-                            min_track_seconds=p.stream_min_track_seconds,
-                        )
-                        self._keep_track(previous[0], rescored, labels, xyz, t)
+                        relaxed = score(p.copy(hover_min_frames=p.hover_keep_frames))
+                        self._keep_track(previous[0], relaxed, labels, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
