@@ -166,7 +166,9 @@ def main(argv=None) -> int:
                     f" det_obs={_f(row['observable_detection_rate'])}"
                     f" det={_f(row['detection_rate'])} cov={_f(row['coverage'])}"
                     f" rmse={_f(row['rmse'])} p95={_f(row['p95_error'])}"
-                    f" fa={_f(row['false_alarm_fraction'])} t={seconds:.2f}s",
+                    f" fa={_f(row['false_alarm_fraction'])}"
+                    f" acq={_f(row['mean_acquisition_delay'])}"
+                    f" tracked={_f(row['tracked_detection_rate'])} t={seconds:.2f}s",
                     file=sys.stderr,
                     flush=True,
                 )
@@ -190,11 +192,11 @@ def print_summary(rows, markdown: bool) -> None:
     modes = list(dict.fromkeys(r["mode"] for r in rows))
     header = (
         "| scenario | mode | seeds | detection (observable) | detection (all GT) | coverage "
-        "| RMSE m | p95 m | false alarms (% time) | run time s |"
+        "| RMSE m | p95 m | false alarms (% time) | acquisition s | tracked % | run time s |"
     )
     print(header if markdown else header.replace("|", " "))
     if markdown:
-        print("|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for sc in scenarios:
         for mode in modes:
             rs = [r for r in rows if r["scenario"] == sc and r["mode"] == mode]
@@ -211,6 +213,8 @@ def print_summary(rows, markdown: bool) -> None:
                 _num(_mean(rs, "rmse")),
                 _num(_mean(rs, "p95_error")),
                 _pct(fa),
+                _num(_mean(rs, "mean_acquisition_delay")),
+                _pct(_mean(rs, "tracked_detection_rate")),
                 _num(_mean(rs, "seconds")),
             ]
             line = "| " + " | ".join(cells) + " |"

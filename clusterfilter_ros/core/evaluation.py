@@ -9,7 +9,12 @@ otherwise the sample has no prediction. Over the ground-truth samples:
 - detection rate: fraction with a prediction within ``hit_radius`` metres;
 - observable detection rate: the same over the samples flagged observable (e.g. the
   drone gave at least one lidar return in the surrounding second);
-- mean / RMSE / median / p95 of the 3D error and the MSE (m^2) over matched samples.
+- mean / RMSE / median / p95 of the 3D error and the MSE (m^2) over matched samples;
+- acquisition: the observable samples fall into appearances (runs separated by more
+  than ``reacquire_gap`` seconds without one); per appearance, the delay from its first
+  sample to its first hit, and the tracked detection rate, the detection rate over the
+  samples from that first hit on. A causal detector needs time to confirm a new
+  object; these separate that time from the losses of an established track.
 
 On drone-free data, :func:`false_alarm_seconds` measures how long anything was reported.
 """
@@ -43,6 +48,11 @@ class EvaluationResult:
     false_alarm_seconds: float
     false_alarm_fraction: float
     duration: float
+    n_appearances: int = 0
+    n_acquired: int = 0
+    mean_acquisition_delay: float = float("nan")
+    max_acquisition_delay: float = float("nan")
+    tracked_detection_rate: float = float("nan")
     errors: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
     matched_xyz: np.ndarray = field(default_factory=lambda: np.empty((0, 3)), repr=False)
 
@@ -65,6 +75,11 @@ class EvaluationResult:
             "false_alarm_seconds",
             "false_alarm_fraction",
             "duration",
+            "n_appearances",
+            "n_acquired",
+            "mean_acquisition_delay",
+            "max_acquisition_delay",
+            "tracked_detection_rate",
         ):
             v = getattr(self, name)
             out[name] = None if isinstance(v, float) and math.isnan(v) else v
@@ -110,12 +125,15 @@ def evaluate(
     hit_radius: float = 2.0,
     observable: np.ndarray | None = None,
     duration: float | None = None,
+    reacquire_gap: float = 2.0,
 ) -> EvaluationResult:
     """Compare predictions with ground truth; see the module docstring.
 
     ``observable``: optional (len(gt),) bool mask of GT samples at which the drone was
     observable. ``duration``: length (s) of the recording, for the false-alarm fraction
     (default: the GT span, or the prediction span if there is no GT).
+    ``reacquire_gap``: seconds without an observable sample after which the drone's
+    next observable sample starts a new appearance (acquisition metrics).
     """
     n_gt = len(gt)
     matched = interpolate_predictions(pred, gt.stamps, max_gap)
@@ -145,6 +163,7 @@ def evaluate(
     fa = false_alarm_seconds(fa_pred, max_gap) if len(fa_pred) else 0.0
     if duration > 0:
         fa = min(fa, float(duration))
+    acq = acquisition(gt.stamps[obs], hit[obs], reacquire_gap)
     return EvaluationResult(
         n_gt=n_gt,
         n_pred=len(pred),
@@ -161,9 +180,52 @@ def evaluate(
         false_alarm_seconds=fa,
         false_alarm_fraction=fa / duration if duration > 0 else nan,
         duration=float(duration),
+        n_appearances=acq.n_appearances,
+        n_acquired=acq.n_acquired,
+        mean_acquisition_delay=float(acq.delays.mean()) if acq.delays.size else nan,
+        max_acquisition_delay=float(acq.delays.max()) if acq.delays.size else nan,
+        tracked_detection_rate=acq.tracked_rate,
         errors=err,
         matched_xyz=matched,
     )
+
+
+@dataclass
+class Acquisition:
+    """How soon each appearance of the drone was detected, and how well it was kept."""
+
+    n_appearances: int
+    n_acquired: int
+    delays: np.ndarray  # seconds from each acquired appearance's start to its first hit
+    tracked_rate: float  # hits / samples from each appearance's first hit on (NaN: none)
+
+
+def acquisition(stamps: np.ndarray, hit: np.ndarray, reacquire_gap: float = 2.0) -> Acquisition:
+    """Acquisition metrics over time-sorted samples (``stamps``) and whether each was
+    detected (``hit``). Samples more than ``reacquire_gap`` s apart start a new
+    appearance; an appearance without a hit counts as not acquired."""
+    stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
+    hit = np.asarray(hit, dtype=bool).reshape(-1)
+    if stamps.size == 0:
+        return Acquisition(0, 0, np.empty(0), float("nan"))
+    new = np.ones(stamps.size, dtype=bool)
+    new[1:] = np.diff(stamps) > reacquire_gap
+    segment = np.cumsum(new) - 1
+    starts = np.flatnonzero(new)
+    # Hits so far within the sample's own appearance (the sample itself included).
+    hits_so_far = np.cumsum(hit)
+    before = np.concatenate([[0], hits_so_far])[starts]
+    tracked = hits_so_far - before[segment] > 0
+    first_hit = np.full(starts.size, -1)
+    hit_idx = np.flatnonzero(hit)
+    # The first hit of each appearance: the earliest hit index in that segment.
+    seg_of_hit = segment[hit_idx]
+    uniq, pos = np.unique(seg_of_hit, return_index=True)
+    first_hit[uniq] = hit_idx[pos]
+    acquired = first_hit >= 0
+    delays = stamps[first_hit[acquired]] - stamps[starts[acquired]]
+    rate = float(hit[tracked].mean()) if tracked.any() else float("nan")
+    return Acquisition(int(starts.size), int(acquired.sum()), delays, rate)
 
 
 def _gt_at(gt: TimedPositions, stamps: np.ndarray, max_gap: float) -> np.ndarray:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from clusterfilter_ros.core.evaluation import (
+    acquisition,
     evaluate,
     false_alarm_seconds,
     interpolate_predictions,
@@ -81,3 +82,40 @@ def test_false_alarms_near_the_ends_of_the_ground_truth():
     # Just before the GT but 5 m off, and long before it: both are false alarms.
     off = evaluate(tp([0.0, 0.95], [[0, 0, 10], [5, 0, 10]]), gt, duration=10.0)
     assert off.false_alarm_seconds == pytest.approx(0.3 + 0.3)
+
+
+def test_acquisition_delay_and_tracked_rate():
+    # Two appearances (a 3 s gap): hits from 1.0 s in the first, from 11.5 s in the
+    # second, where the track drops one sample after acquisition.
+    stamps = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 10.0, 10.5, 11.0, 11.5, 12.0, 12.5])
+    hit = np.array([0, 0, 1, 1, 1, 0, 0, 0, 1, 0, 1], bool)
+    acq = acquisition(stamps, hit, reacquire_gap=2.0)
+    assert acq.n_appearances == 2 and acq.n_acquired == 2
+    assert acq.delays.tolist() == pytest.approx([1.0, 1.5])
+    assert acq.tracked_rate == pytest.approx(5 / 6)
+    # A shorter gap than reacquire_gap keeps one appearance.
+    one = acquisition(stamps, hit, reacquire_gap=10.0)
+    assert one.n_appearances == 1 and one.delays.tolist() == pytest.approx([1.0])
+    assert one.tracked_rate == pytest.approx(5 / 9)
+    missed = acquisition(np.array([0.0, 0.5]), np.zeros(2, bool))
+    assert missed.n_appearances == 1 and missed.n_acquired == 0 and missed.delays.size == 0
+    assert math.isnan(missed.tracked_rate)
+    empty = acquisition(np.empty(0), np.empty(0, bool))
+    assert empty.n_appearances == 0 and math.isnan(empty.tracked_rate)
+
+
+def test_acquisition_in_evaluate_uses_the_observable_samples():
+    stamps = np.arange(0.0, 6.0, 0.5)
+    gt = tp(stamps, np.zeros((stamps.size, 3)))
+    # The drone is observable from 1.0 s; reports start at 2.5 s.
+    obs = stamps >= 1.0
+    pred = tp(stamps[stamps >= 2.5], np.zeros((int((stamps >= 2.5).sum()), 3)))
+    r = evaluate(pred, gt, observable=obs)
+    assert r.n_appearances == 1 and r.n_acquired == 1
+    assert r.mean_acquisition_delay == pytest.approx(1.5)
+    assert r.max_acquisition_delay == pytest.approx(1.5)
+    assert r.tracked_detection_rate == 1.0
+    d = r.as_dict()
+    assert d["mean_acquisition_delay"] == pytest.approx(1.5)
+    quiet = evaluate(tp(np.empty(0), np.empty((0, 3))), gt, observable=obs).as_dict()
+    assert quiet["n_acquired"] == 0 and quiet["mean_acquisition_delay"] is None
