@@ -782,6 +782,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         minimum=0.0,
         maximum=1.0,
     ),
+    ParamSpec(
+        "reacquire_window",
+        "float",
+        3.0,
+        "Streaming: how long after its newest return a reported track can still be picked "
+        "up again: a track slower than min_speed takes a return within track_gate of its "
+        "position, and at a re-clustering a cluster near where the track would be now (its "
+        "last position moved on at its velocity, within track_gate + link_max_accel x "
+        "dt^2 / 2) continues it with keep_confidence; 0 switches this off.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
     # --- streaming accumulator ---
     ParamSpec(
         "global_window",

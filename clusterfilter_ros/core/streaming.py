@@ -105,6 +105,8 @@ class StreamingDetector:
         self._clusters = 0
         self._foreground_points = 0
         self._jump_candidate: float | None = None
+        # (newest sample time, position there, velocity) of the last reported track.
+        self._last_reported: tuple[float, np.ndarray, np.ndarray] | None = None
 
     def update_params(self, values: Mapping[str, Any]) -> None:
         """Validate and apply new values; the state is reset only if a voxel or filter
@@ -249,6 +251,8 @@ class StreamingDetector:
         if p.static_suppression and self._static.size:
             self._drop_static_from_history()
         previous = self._fit(self._now) if self._selected_conf >= p.min_confidence else None
+        if self._selected_conf >= p.min_confidence and self._track:
+            self._last_reported = self._track_state()
         old_track = list(self._track)
         self._track.clear()
         self._selected_conf = 0.0
@@ -283,21 +287,54 @@ class StreamingDetector:
                     self._rebuild_track(labels == best, xyz, t)
                     self._carry_over(old_track)
                     self._catch_up()
-                elif previous is not None and p.keep_confidence < p.min_confidence:
-                    kept = self._keep_track(previous[0], scores, labels, xyz, t)
-                    if not kept and p.hover_detection and p.hover_keep_frames < p.hover_min_frames:
-                        # A hovering drone 10-20 m away leaves about as many frames in the
-                        # history as hover_min_frames asks: once reported, fewer suffice.
-                        relaxed = score(p.copy(hover_min_frames=p.hover_keep_frames))
-                        self._keep_track(previous[0], relaxed, labels, xyz, t)
+                elif p.keep_confidence < p.min_confidence:
+                    where = self._expected_position(previous)
+                    if where is not None:
+                        kept = self._keep_track(*where, scores, labels, xyz, t)
+                        if (
+                            not kept
+                            and p.hover_detection
+                            and p.hover_keep_frames < p.hover_min_frames
+                        ):
+                            # A hovering drone 10-20 m away leaves about as many frames in
+                            # the history as hover_min_frames asks: once reported, fewer
+                            # suffice.
+                            relaxed = score(p.copy(hover_min_frames=p.hover_keep_frames))
+                            self._keep_track(*where, relaxed, labels, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
 
+    def _expected_position(
+        self, previous: tuple[np.ndarray, int] | None
+    ) -> tuple[np.ndarray, float] | None:
+        """(position, gate) where the reported track should be now: its fit while it
+        is fresh, else, for ``reacquire_window`` seconds after its newest sample, that
+        sample's position moved on at the track's velocity, with a gate widened by
+        half ``link_max_accel`` times the squared time since; None otherwise."""
+        p = self.params
+        if previous is not None:
+            return previous[0], p.track_gate
+        if self._last_reported is None:
+            return None
+        t_last, position, velocity = self._last_reported
+        dt = self._now - t_last
+        if p.reacquire_window <= 0 or not 0.0 <= dt <= p.reacquire_window:
+            return None
+        return position + velocity * dt, p.track_gate + 0.5 * p.link_max_accel * dt * dt
+
+    def _track_state(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """(newest sample time, fitted position there, velocity) of the track."""
+        last = max(s.t for s in self._track)
+        pred = self._predict(last)
+        assert pred is not None  # the track has a sample at ``last``
+        return last, pred[0], pred[3]
+
     def _keep_track(
         self,
         predicted: np.ndarray,
+        gate: float,
         scores: Any,
         labels: np.ndarray,
         xyz: np.ndarray,
@@ -308,9 +345,7 @@ class StreamingDetector:
         True if it did."""
         p = self.params
         recent = (t >= self._now - p.track_window) & (labels >= 0)
-        near = recent & (
-            np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= p.track_gate**2
-        )
+        near = recent & (np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= gate**2)
         if not near.any():
             return False
         c = int(np.bincount(labels[near]).argmax())
@@ -379,13 +414,14 @@ class StreamingDetector:
         pred = self._predict(stamp)
         if pred is None:
             return None
-        position, n, age, speed = pred
+        position, n, age, velocity = pred
+        speed = float(np.linalg.norm(velocity))
         p = self.params
         limit = max(p.max_extrapolation, p.max_gap) if speed < p.min_speed else p.max_extrapolation
         return (position, n) if age <= limit else None
 
-    def _predict(self, stamp: float) -> tuple[np.ndarray, int, float, float] | None:
-        """(position, points, age of the newest sample, speed) at ``stamp`` from a weighted
+    def _predict(self, stamp: float) -> tuple[np.ndarray, int, float, np.ndarray] | None:
+        """(position, points, age of the newest sample, velocity) at ``stamp`` from a weighted
         fit over the track's last track_window seconds of samples (at least the last
         three), or None without a sample at or before ``stamp``. The fit is a straight
         line, or a quadratic when at least 6 samples span 0.6 s, the newest is at most two
@@ -408,7 +444,7 @@ class StreamingDetector:
         slope, mean, tc = weighted_line(ts, ps, ws)
         if ts[-1] - ts[0] < 2 * p.frame_period:
             slope = np.zeros(3)  # too short a span for a velocity
-        age, speed = stamp - last, float(np.linalg.norm(slope))
+        age = stamp - last
         if ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= 2 * p.frame_period:
             # A well-sampled, fresh track: a quadratic follows a turn or a change of speed
             # without the straight line's lag, unless its acceleration is implausible.
@@ -418,8 +454,8 @@ class StreamingDetector:
             coef = np.linalg.lstsq(design, ps * sw, rcond=None)[0]
             if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
                 x = stamp - tc
-                return coef[0] + coef[1] * x + coef[2] * x * x, n, age, speed
-        return mean + slope * (stamp - tc), n, age, speed
+                return coef[0] + coef[1] * x + coef[2] * x * x, n, age, slope
+        return mean + slope * (stamp - tc), n, age, slope
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
         """Append the frame's points within ``track_gate`` of the track's predicted
@@ -429,8 +465,12 @@ class StreamingDetector:
         pred = self._predict(stamp)
         if pred is None:
             return
-        predicted, _, age, _ = pred
-        if age > max(p.max_extrapolation, p.max_gap):
+        predicted, _, age, velocity = pred
+        limit = max(p.max_extrapolation, p.max_gap)
+        if float(np.linalg.norm(velocity)) < p.min_speed:
+            # A hovering drone seen once every second or two is still where it was.
+            limit = max(limit, p.reacquire_window)
+        if age > limit:
             return
         gate = p.track_gate
         d2 = np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1)

@@ -259,3 +259,43 @@ def test_a_reported_hovering_drone_needs_only_hover_keep_frames_to_stay_reported
     assert sum(s > 20.0 for s in kept) > 30  # with it, still reported
     for e in run_streaming(frames):
         assert np.linalg.norm(e.position - [12.0, 6.0, 15.0]) < 0.5
+
+
+def test_a_slow_track_takes_a_return_after_a_long_gap_within_reacquire_window():
+    times = np.arange(0.0, 2.0, 0.2)
+    hover = [(10.0 + 0.01 * t, 5.0, 20.0) for t in times]
+    fast = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
+    t_new = times[-1] + 1.8  # past max_gap (1 s), within reacquire_window (3 s)
+    for path, window, taken in ((hover, 3.0, True), (hover, 0.0, False), (fast, 3.0, False)):
+        det = _tracked(times, path, reacquire_window=window)
+        near = det._predict(t_new)[0]
+        det._extend_track(t_new, near[None, :].astype(np.float32), np.array([t_new]))
+        assert bool(det._track[-1].t == t_new) is taken, (window, path is hover)
+    det = _tracked(times, hover, reacquire_window=3.0)
+    late = times[-1] + 3.5
+    det._extend_track(late, np.array([hover[-1]], np.float32), np.array([late]))
+    assert det._track[-1].t == times[-1]  # beyond the window
+
+
+def test_a_lost_track_is_looked_for_where_it_would_be_now():
+    times = np.arange(0.0, 2.0, 0.2)
+    fast = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
+    det = _tracked(times, fast)
+    det._last_reported = det._track_state()
+    t_last, position, velocity = det._last_reported
+    assert t_last == times[-1]
+    assert np.allclose(velocity, [8.0, 0.0, 0.0], atol=1e-6)
+    det._now = t_last + 1.0
+    where, gate = det._expected_position(None)
+    assert np.allclose(where, [10.0 + 8.0 * det._now, 5.0, 20.0], atol=1e-6)
+    p = det.params
+    assert gate == pytest.approx(p.track_gate + 0.5 * p.link_max_accel)
+    det._now = t_last + p.reacquire_window + 0.1
+    assert det._expected_position(None) is None
+    # A fresh track's own fit wins, with the normal gate.
+    fresh = (np.array([1.0, 2.0, 3.0]), 9)
+    assert det._expected_position(fresh)[1] == p.track_gate
+    det.update_params({"reacquire_window": 0.0})
+    det._last_reported = (t_last, position, velocity)
+    det._now = t_last + 0.5
+    assert det._expected_position(None) is None
