@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from clusterfilter_ros.core import streaming
-from clusterfilter_ros.core.background import static_mask_offline
+from clusterfilter_ros.core.background import static_offline
 from clusterfilter_ros.core.clustering import density_mask
 from clusterfilter_ros.core.evaluation import interpolate_predictions, observable_mask
 from clusterfilter_ros.core.frame import TimedPositions
@@ -88,15 +88,16 @@ def trace(sim, params):
         keep[noisy] = density_mask(xyz[noisy], params.denoise_voxel, params.denoise_min_points)
     after_denoise = keep.copy()
     stages["denoise"] = int((drone & keep).sum())
+    structure = None
     if params.static_suppression:
         idx = np.nonzero(keep)[0]
-        static = static_mask_offline(xyz[idx], t[idx], params)
+        static, structure = static_offline(xyz[idx], t[idx], params)
         keep[idx[static]] = False
     stages["static"] = int((drone & keep).sum())
     kx, kt, kd, kc = xyz[keep], t[keep], drone[keep], cls[keep]
     labels, k = global_clusters(kx, kt, params)
     stages["clustered"] = int((kd & (labels >= 0)).sum())
-    scores = score_clusters(labels, kx, kt, params, n_clusters=k)
+    scores = score_clusters(labels, kx, kt, params, n_clusters=k, structure_keys=structure)
     selected = select_clusters(scores, params)
     cand = scores.candidate
     stages["candidate"] = int((kd & (labels >= 0) & cand[np.maximum(labels, 0)]).sum())

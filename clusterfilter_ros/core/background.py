@@ -37,13 +37,7 @@ def _dilate(static_keys: np.ndarray, dilation: int) -> np.ndarray:
     """Sorted keys of the static voxels plus their 26 neighbours (dilation 1)."""
     if dilation <= 0 or static_keys.size == 0:
         return static_keys
-    offs = [
-        voxel.offset_key((dx, dy, dz))
-        for dx in (-1, 0, 1)
-        for dy in (-1, 0, 1)
-        for dz in (-1, 0, 1)
-    ]
-    return np.unique((static_keys[:, None] + np.asarray(offs, dtype=np.int64)[None, :]).ravel())
+    return np.unique((static_keys[:, None] + voxel.NEIGHBOURHOOD[None, :]).ravel())
 
 
 def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray:
@@ -71,9 +65,17 @@ def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray
 
 def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
     """(N,) bool: points in voxels occupied in >= static_min_bins time bins of the sequence."""
+    return static_offline(xyz, t, params)[0]
+
+
+def static_offline(
+    xyz: np.ndarray, t: np.ndarray, params: ParamSet
+) -> tuple[np.ndarray, np.ndarray]:
+    """(mask of the points in static voxels, sorted keys of those voxels) over a whole
+    sequence; see :func:`static_mask_offline`."""
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros(0, dtype=bool), np.empty(0, np.int64)
     keys = voxel.voxel_keys(xyz, params.static_voxel)
     bins = np.floor((t - t.min()) / params.static_bin).astype(np.int64)
     ukeys, kinv = np.unique(keys, return_inverse=True)
@@ -85,7 +87,7 @@ def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.
     if params.hover_detection:
         static_keys = np.setdiff1d(static_keys, compact_static_keys(static_keys, params))
     static_keys = _dilate(static_keys, params.static_dilation)
-    return voxel.lookup(static_keys, keys) >= 0
+    return voxel.lookup(static_keys, keys) >= 0, static_keys
 
 
 class BackgroundGrid:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clusterfilter_ros.core.background import static_mask_offline
+from clusterfilter_ros.core.background import static_offline
 from clusterfilter_ros.core.clustering import (
     dbscan_points,
     density_mask,
@@ -149,11 +149,12 @@ def detect_offline(
     if noisy.any():
         keep[noisy] = density_mask(xyz[noisy], params.denoise_voxel, params.denoise_min_points)
     xyz, t = xyz[keep], t[keep]
+    structure = None
     if params.static_suppression and t.size:
-        moving = ~static_mask_offline(xyz, t, params)
-        xyz, t = xyz[moving], t[moving]
+        static, structure = static_offline(xyz, t, params)
+        xyz, t = xyz[~static], t[~static]
     labels, k = global_clusters(xyz, t, params)
-    scores = score_clusters(labels, xyz, t, params, n_clusters=k)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
     selected = select_clusters(scores, params)
     rows = scores.rows()
     for row in rows:

@@ -327,7 +327,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "hover_min_frames",
         "int",
-        20,
+        15,
         "Frames with points a compact motionless cluster needs to count as a hovering drone.",
         minimum=1,
         maximum=100000,
@@ -335,12 +335,23 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "hover_keep_frames",
         "int",
-        15,
+        11,
         "Streaming: a hovering track being reported stays reported while its cluster has "
         "this many frames with points (hysteresis with keep_confidence; a new one needs "
         "hover_min_frames); values >= hover_min_frames switch this off.",
         minimum=1,
         maximum=100000,
+    ),
+    ParamSpec(
+        "hover_max_contact",
+        "float",
+        0.5,
+        "A cluster is taken for a hovering drone only if at most this share of its points "
+        "lie in or next to (26 neighbours) a static_voxel of suppressed static structure: "
+        "the swaying edge of a tree crown is compact and seen in many frames too; 1 "
+        "switches this off.",
+        minimum=0.0,
+        maximum=1.0,
     ),
     ParamSpec(
         "warmup",

@@ -197,6 +197,33 @@ def local_window_features(
     return out
 
 
+def structure_contact(
+    lab: np.ndarray,
+    pts: np.ndarray,
+    k: int,
+    which: np.ndarray,
+    structure_keys: np.ndarray,
+    voxel_size: float,
+) -> np.ndarray:
+    """(k,) share of the points of each cluster flagged in ``which`` whose voxel of edge
+    ``voxel_size`` is, or touches (26 neighbours), a voxel in the sorted
+    ``structure_keys``; 0 for the clusters not flagged."""
+    out = np.zeros(k)
+    sel = which[lab]
+    if not sel.any():
+        return out
+    keys, inverse = np.unique(voxel.voxel_keys(pts[sel], voxel_size), return_inverse=True)
+    around = keys[:, None] + voxel.NEIGHBOURHOOD[None, :]
+    touching = (voxel.lookup(structure_keys, around.ravel()) >= 0).reshape(around.shape)
+    per_point = touching.any(axis=1)[inverse.reshape(-1)]
+    cl = lab[sel]
+    counts = np.bincount(cl, minlength=k)
+    hits = np.bincount(cl, weights=per_point, minlength=k)
+    flagged = counts > 0
+    out[flagged] = hits[flagged] / counts[flagged]
+    return out
+
+
 def score_clusters(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -208,8 +235,14 @@ def score_clusters(
     global_voxels: np.ndarray | None = None,
     t0: float | None = None,
     min_track_seconds: float | None = None,
+    structure_keys: np.ndarray | None = None,
 ) -> ClusterScores:
     """Features, gates and scores of clusters ``0..n_clusters-1``.
+
+    ``structure_keys``: sorted ``static_voxel`` keys of the suppressed static structure;
+    a cluster is taken for a hovering drone only if at most ``hover_max_contact`` of its
+    points lie in or next to one of them (a swaying crown's edge, not a drone in the
+    open).
 
     ``min_track_seconds`` (default ``params.min_track_seconds``, the offline value)
     scales the confidence of clusters seen for less than that many seconds; streaming
@@ -313,6 +346,11 @@ def score_clusters(
             hovering = (core_extent <= params.hover_max_extent) & (
                 res.support_frames >= params.hover_min_frames
             )
+            if structure_keys is not None and structure_keys.size and hovering.any():
+                contact = structure_contact(
+                    lab, pts, k, hovering, structure_keys, float(params.static_voxel)
+                )
+                hovering &= contact <= float(params.hover_max_contact)
         res.normalized_score = motion * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
         if params.hover_detection:
             # Staying in place is what lowers R and raises IoU, so a hovering candidate

@@ -277,6 +277,7 @@ class StreamingDetector:
                     n_clusters=k,
                     t0=t0,
                     min_track_seconds=p.stream_min_track_seconds,
+                    structure_keys=self._static if p.static_suppression else None,
                 )
                 scores = score(p)
                 chosen = select_clusters(scores, p)

@@ -63,6 +63,13 @@ def offset_key(offset: np.ndarray) -> int:
     return (dx << (2 * _BITS)) + (dy << _BITS) + dz
 
 
+#: Key offsets of a voxel and its 26 neighbours (itself included).
+NEIGHBOURHOOD = np.array(
+    [offset_key((dx, dy, dz)) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)],
+    dtype=np.int64,
+)
+
+
 # --- space-time keys: 15 bits per spatial axis, 18 bits of time bins -------------------
 _S_BITS = 15
 _S_OFFSET = 1 << (_S_BITS - 1)

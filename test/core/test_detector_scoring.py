@@ -85,3 +85,52 @@ def test_no_clusters():
         np.empty(0, int), np.empty((0, 3)), np.empty(0), detector_params(), n_clusters=0
     )
     assert len(s) == 0 and select_clusters(s, detector_params()) == []
+
+
+def test_structure_contact_counts_points_in_or_next_to_structure_voxels():
+    from clusterfilter_ros.core import voxel
+    from clusterfilter_ros.core.scoring import structure_contact
+
+    size = 1.5
+    structure = np.unique(voxel.voxel_keys(np.array([[0.75, 0.75, 0.75]]), size))
+    pts = np.array(
+        [
+            [0.8, 0.8, 0.8],  # in the structure voxel
+            [2.0, 0.8, 0.8],  # in the next voxel: touching
+            [5.0, 0.8, 0.8],  # three voxels away
+            [2.0, 2.0, 2.0],  # diagonal neighbour: touching
+            [0.8, 0.8, 0.8],  # cluster 1, not asked about
+        ]
+    )
+    lab = np.array([0, 0, 0, 0, 1])
+    share = structure_contact(lab, pts, 2, np.array([True, False]), structure, size)
+    assert share.tolist() == [0.75, 0.0]
+
+
+def _hovering_cluster(seed: int = 4):
+    """One return every other frame for 15 s, scattered 0.15 m around (5, 5, 18)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 15.0, 0.2)
+    xyz = np.array([5.0, 5.0, 18.0]) + rng.normal(0, 0.15, (t.size, 3))
+    return xyz, t, np.zeros(t.size, int)
+
+
+def test_a_hovering_cluster_next_to_static_structure_is_not_a_hovering_drone():
+    from clusterfilter_ros.core import voxel
+
+    xyz, t, lab = _hovering_cluster()
+    params = detector_params()
+    sv = params.static_voxel
+    steps = (-1.5, 0.0, 1.5)
+    face = [[5.0 + dx, 5.0 + dy, 18.0 + dz] for dx in (1.5, 2.0) for dy in steps for dz in steps]
+    beside = np.unique(voxel.voxel_keys(np.array(face), sv))
+    far = np.unique(voxel.voxel_keys(np.array(face) + [20.0, 0.0, 0.0], sv))
+    alone = score_clusters(lab, xyz, t, params, n_clusters=1)
+    assert alone.candidate[0] and alone.confidence[0] > params.min_confidence
+    kw = {"n_clusters": 1}
+    assert score_clusters(lab, xyz, t, params, structure_keys=far, **kw).candidate[0]
+    near = score_clusters(lab, xyz, t, params, structure_keys=beside, **kw)
+    assert near.normalized_score[0] < 0.5  # not scored as hovering any more
+    assert not select_clusters(near, params)
+    off = params.copy(hover_max_contact=1.0)
+    assert select_clusters(score_clusters(lab, xyz, t, off, structure_keys=beside, **kw), off)

@@ -250,14 +250,14 @@ def _hover_frames(duration: float = 30.0, thin_after: float = 15.0) -> list[Fram
 
 def test_a_reported_hovering_drone_needs_only_hover_keep_frames_to_stay_reported():
     frames = _hover_frames()
-    kept = [e.stamp - 1000.0 for e in run_streaming(frames)]
-    off = [
-        e.stamp - 1000.0 for e in run_streaming(frames, detector_params({"hover_keep_frames": 20}))
-    ]
+    new, kept_by = 20, 15  # frames a new / a reported hovering track needs
+    params = detector_params({"hover_min_frames": new, "hover_keep_frames": kept_by})
+    kept = [e.stamp - 1000.0 for e in run_streaming(frames, params)]
+    off = [e.stamp - 1000.0 for e in run_streaming(frames, params.copy(hover_keep_frames=new))]
     assert min(kept) == min(off) < 15.0  # found once it has hover_min_frames (20)
     assert max(off) < 20.0  # without the hysteresis, lost as the returns thin out
     assert sum(s > 20.0 for s in kept) > 30  # with it, still reported
-    for e in run_streaming(frames):
+    for e in run_streaming(frames, params):
         assert np.linalg.norm(e.position - [12.0, 6.0, 15.0]) < 0.5
 
 
