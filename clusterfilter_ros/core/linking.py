@@ -53,11 +53,29 @@ def linking_reach(gap: np.ndarray, params: ParamSet) -> np.ndarray:
 def _frame_samples(
     labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, frame_period: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per (cluster, frame) mean: cluster id, time, position, point count, bbox side."""
-    fb = np.floor((t - t.min()) / frame_period + 1e-6).astype(np.int64)
-    nb = int(fb.max()) + 1
-    u, inv, n = np.unique(labels * nb + fb, return_inverse=True, return_counts=True)
+    """Per (cluster, frame) mean: cluster id, time, position, point count, bbox side.
+
+    A cluster's returns form one frame sample while each follows the previous one within
+    half a ``frame_period`` (one sweep over the object, both lidars at about the same
+    moment); a run longer than ``frame_period`` is cut every ``frame_period`` from its
+    first return. The samples depend on the gaps between returns only, not on where a
+    fixed time grid happens to start, so adding or removing unrelated points elsewhere in
+    the cloud cannot move a fragment's returns from one sample to two. Samples come
+    sorted by cluster, then time.
+    """
+    order = np.lexsort((t, labels))
+    lab_s, t_s = labels[order], t[order]
+    new = np.ones(t_s.size, dtype=bool)
+    new[1:] = (lab_s[1:] != lab_s[:-1]) | (np.diff(t_s) > frame_period / 2)
+    run_start = np.maximum.accumulate(np.where(new, np.arange(t_s.size), 0))
+    within = np.floor((t_s - t_s[run_start]) / frame_period + 1e-6).astype(np.int64)
+    key_s = (np.cumsum(new) - 1) * (int(within.max()) + 1) + within
+    key = np.empty_like(key_s)
+    key[order] = key_s
+    u, inv, n = np.unique(key, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
+    cid = np.empty(u.size, dtype=np.int64)
+    cid[inv] = labels
     n = n.astype(np.float64)
     ts = np.bincount(inv, weights=t) / n
     ps = np.stack([np.bincount(inv, weights=xyz[:, a]) for a in range(3)], axis=1) / n[:, None]
@@ -65,7 +83,7 @@ def _frame_samples(
     hi = np.full((u.size, 3), -np.inf)
     np.minimum.at(lo, inv, xyz)
     np.maximum.at(hi, inv, xyz)
-    return u // nb, ts, ps, n, (hi - lo).max(axis=1)
+    return cid, ts, ps, n, (hi - lo).max(axis=1)
 
 
 def _line_fits(
