@@ -483,6 +483,10 @@ def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int
 
 #: Fewest points for a residual window to count (a quadratic in 3 axes has 9 unknowns).
 RESIDUAL_MIN_POINTS = 6
+#: Points farther from a window's quadratic fit than this many times the window's median
+#: distance (at least RESIDUAL_MEDIAN_FLOOR m) do not count in its residual (deviation 32).
+RESIDUAL_OUTLIER_FACTOR = 10.0
+RESIDUAL_MEDIAN_FLOOR = 0.05
 
 
 def track_residual(
@@ -503,7 +507,9 @@ def track_residual(
     with at least :data:`RESIDUAL_MIN_POINTS` points spanning at least half the window,
     x, y and z are fitted by least squares as quadratics of time, and the RMS distance of
     the points to the fit is taken (squares summed over n - 3 degrees of freedom, so few
-    points do not look smooth by overfitting). The result is the point-weighted mean over a
+    points do not look smooth by overfitting), leaving out points farther from the fit
+    than :data:`RESIDUAL_OUTLIER_FACTOR` times the window's median distance (a stray
+    return joined to the track). The result is the point-weighted mean over a
     cluster's windows, 0 for clusters without such a window (no evidence either way).
     An acceleration-limited drone leaves only its body size and range noise (simulation:
     0.07-0.39 m); an erratic bird or a swaying branch leaves much more.
@@ -614,8 +620,17 @@ def _window_fits(
     else:
         fitted = np.einsum("np,npa->na", powers, coef[inv])
         sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
+        # One stray return metres away (noise the clusterer joined to the track) would
+        # dominate the RMS of a window of a hundred returns: points farther from the fit
+        # than RESIDUAL_OUTLIER_FACTOR times the window's median distance are left out.
+        median = group_median(inv, np.sqrt(sq), m)
+        limit = RESIDUAL_OUTLIER_FACTOR * np.maximum(median, RESIDUAL_MEDIAN_FLOOR)
+        keep = sq <= limit[inv] ** 2
+        n_keep = np.bincount(inv[keep], minlength=m).astype(np.float64)
         # Unbiased: the fit spends 3 degrees of freedom per axis.
-        per_window = np.sqrt(np.bincount(inv, weights=sq, minlength=m) / np.maximum(n - 3.0, 1.0))
+        per_window = np.sqrt(
+            np.bincount(inv[keep], weights=sq[keep], minlength=m) / np.maximum(n_keep - 3.0, 1.0)
+        )
     return (cw_u // n_win)[ok], per_window[ok], n[ok]
 
 

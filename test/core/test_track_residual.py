@@ -132,3 +132,23 @@ def test_acceleration_over_several_window_phases_depends_little_on_where_windows
     # The residual (not the acceleration) keeps one grid whatever `phases` says.
     one = track_residual(lab, xyz, t, 1, 1.0, 0.0)
     assert np.array_equal(one, track_residual(lab, xyz, t, 1, 1.0, 0.0, phases=8))
+
+
+def test_a_stray_return_metres_away_does_not_make_a_smooth_track_erratic(monkeypatch) -> None:
+    from clusterfilter_ros.core import scoring
+
+    lab = np.zeros(600, dtype=np.int64)
+    t, p = _track(False)
+    clean = track_residual(lab, p, t, 1, 2.0, 0.0)[0]
+    # One point 7 m off the track in every other 2 s window (a noise return the clusterer
+    # joined to the drone): without the outlier rule the RMS of those windows triples.
+    stray = p.copy()
+    stray[np.arange(30, 600, 120)] += [5.0, 4.0, -2.7]
+    with_stray = track_residual(lab, stray, t, 1, 2.0, 0.0)[0]
+    # The fit itself still leans a little toward the stray point (0.17 -> 0.21 m).
+    assert clean <= with_stray < clean + 0.06 < detector_params().smooth_residual
+    # A bird's wobble moves every point: it is not mistaken for outliers.
+    t_e, p_e = _track(True)
+    assert track_residual(lab, p_e, t_e, 1, 2.0, 0.0)[0] > 0.5
+    monkeypatch.setattr(scoring, "RESIDUAL_OUTLIER_FACTOR", np.inf)
+    assert track_residual(lab, stray, t, 1, 2.0, 0.0)[0] > 0.5  # every point counted
