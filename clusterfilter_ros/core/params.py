@@ -465,9 +465,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "stream_link_passes",
         "int",
-        1,
-        "Streaming: link_passes for the local history (more rounds join more short bird "
-        "legs into chains long enough to look coherent).",
+        4,
+        "Streaming: link_passes for the local history (each round joins chains whose end "
+        "is a one-frame fragment; more rounds can also join short bird legs).",
         minimum=1,
         maximum=20,
     ),
