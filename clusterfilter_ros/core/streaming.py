@@ -250,8 +250,9 @@ class StreamingDetector:
         self._static = self._background.static_keys()
         if p.static_suppression and self._static.size:
             self._drop_static_from_history()
-        previous = self._fit(self._now) if self._selected_conf >= p.min_confidence else None
+        previous = None
         if self._selected_conf >= p.min_confidence and self._track:
+            previous = self._fit(self._now)
             self._last_reported = self._track_state()
         old_track = list(self._track)
         self._track.clear()
