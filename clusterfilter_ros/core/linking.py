@@ -50,19 +50,19 @@ def linking_reach(gap: np.ndarray, params: ParamSet) -> np.ndarray:
     )
 
 
-def _frame_samples(
-    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, frame_period: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per (cluster, frame) mean: cluster id, time, position, point count, bbox side.
+def frame_sample_ids(labels: np.ndarray, t: np.ndarray, frame_period: float) -> np.ndarray:
+    """(N,) frame-sample index per point, 0..S-1, sorted by cluster, then time.
 
     A cluster's returns form one frame sample while each follows the previous one within
     half a ``frame_period`` (one sweep over the object, both lidars at about the same
     moment); a run longer than ``frame_period`` is cut every ``frame_period`` from its
     first return. The samples depend on the gaps between returns only, not on where a
-    fixed time grid happens to start, so adding or removing unrelated points elsewhere in
-    the cloud cannot move a fragment's returns from one sample to two. Samples come
-    sorted by cluster, then time.
+    fixed time grid happens to start.
     """
+    labels = np.asarray(labels, dtype=np.int64).reshape(-1)
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    if t.size == 0:
+        return np.empty(0, dtype=np.int64)
     order = np.lexsort((t, labels))
     lab_s, t_s = labels[order], t[order]
     new = np.ones(t_s.size, dtype=bool)
@@ -72,15 +72,27 @@ def _frame_samples(
     key_s = (np.cumsum(new) - 1) * (int(within.max()) + 1) + within
     key = np.empty_like(key_s)
     key[order] = key_s
-    u, inv, n = np.unique(key, return_inverse=True, return_counts=True)
-    inv = inv.reshape(-1)
-    cid = np.empty(u.size, dtype=np.int64)
+    return np.unique(key, return_inverse=True)[1].reshape(-1)
+
+
+def _frame_samples(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, frame_period: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per (cluster, frame) mean: cluster id, time, position, point count, bbox side.
+
+    Samples are those of :func:`frame_sample_ids`: they follow the gaps between returns,
+    so adding or removing unrelated points elsewhere in the cloud cannot move a
+    fragment's returns from one sample to two. Samples come sorted by cluster, then time.
+    """
+    inv = frame_sample_ids(labels, t, frame_period)
+    n = np.bincount(inv)
+    cid = np.empty(n.size, dtype=np.int64)
     cid[inv] = labels
     n = n.astype(np.float64)
     ts = np.bincount(inv, weights=t) / n
     ps = np.stack([np.bincount(inv, weights=xyz[:, a]) for a in range(3)], axis=1) / n[:, None]
-    lo = np.full((u.size, 3), np.inf)
-    hi = np.full((u.size, 3), -np.inf)
+    lo = np.full((n.size, 3), np.inf)
+    hi = np.full((n.size, 3), -np.inf)
     np.minimum.at(lo, inv, xyz)
     np.maximum.at(hi, inv, xyz)
     return cid, ts, ps, n, (hi - lo).max(axis=1)

@@ -6,9 +6,10 @@
    (``static_suppression``) drop points in persistently occupied voxels.
 3. Cluster the global cloud (voxel connected components, or DBSCAN) and link the
    fragments of one sparse moving object into one cluster (:mod:`~.linking`).
-4. Score every cluster from its local windows; gate; select the drone cluster(s); grow
-   each selected track at its ends by the noise points and small clusters it was
-   heading for, and fill it inside with those on its path.
+4. Score every cluster from its local windows; split a flying cluster too wide to be one
+   object into kinematic tracks (:mod:`~.splitting`) and score those; gate; select the
+   drone cluster(s); grow each selected track at its ends by the noise points and small
+   clusters it was heading for, and fill it inside with those on its path.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
    (or given timestamps) inside the supported span.
 """
@@ -35,6 +36,7 @@ from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragme
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
+from clusterfilter_ros.core.splitting import split_merged
 from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory, merge_trajectories
 
 
@@ -121,14 +123,17 @@ def extend_selected(
     scores: ClusterScores,
     selected: list[int],
     params: ParamSet,
+    exclude: np.ndarray | None = None,
 ) -> np.ndarray:
     """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
     and filled inside (:func:`~.linking.fill_track`) by noise points and clusters too
-    small to be scored (< ``min_cluster_points``)."""
+    small to be scored (< ``min_cluster_points``), except the points in ``exclude``."""
     # Only what is too small to be judged on its own: a cluster that was scored and
     # rejected (an erratic bird, say) must not re-enter through a neighbouring track.
     small = scores.n_points < params.min_cluster_points
     pool = (labels < 0) | small[np.maximum(labels, 0)]
+    if exclude is not None:
+        pool &= ~exclude
     out = labels.copy()
     for c in selected:
         member = fill_track(extend_track(out == c, xyz, t, pool, params), xyz, t, pool, params)
@@ -155,6 +160,11 @@ def detect_offline(
         xyz, t = xyz[~static], t[~static]
     labels, k = global_clusters(xyz, t, params)
     scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
+    was_split = None
+    if params.split_merged:
+        labels, k, was_split = split_merged(labels, xyz, t, scores, params)
+        if was_split.any():
+            scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
     selected = select_clusters(scores, params)
     rows = scores.rows()
     for row in rows:
@@ -165,7 +175,9 @@ def detect_offline(
     if not selected:
         return OfflineResult(empty, np.empty((0, 4)), None, rows, scores, selected)
     if params.link_max_gap > 0:
-        labels = extend_selected(labels, xyz, t, scores, selected, params)
+        # The pieces of a split cluster were scored: none of them re-enters a track as
+        # growth (a bird's piece beside the drone's would).
+        labels = extend_selected(labels, xyz, t, scores, selected, params, was_split)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(

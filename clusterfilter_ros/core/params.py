@@ -481,6 +481,33 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "split_merged",
+        "bool",
+        True,
+        "A flying cluster wider than max_local_extent (a drone and birds near it, joined "
+        "by the clusterer) is split into kinematic tracks, each scored on its own; "
+        "false = keep it whole (it then fails the extent gate).",
+    ),
+    ParamSpec(
+        "split_blob",
+        "float",
+        1.0,
+        "Splitting merged clusters: edge (m) of the voxels whose connected components, "
+        "within one frame sample, are one object's returns.",
+        minimum=0.1,
+        maximum=5.0,
+    ),
+    ParamSpec(
+        "split_gate",
+        "float",
+        1.0,
+        "Splitting merged clusters: distance (m) allowed between a return group and a "
+        "track's predicted position, before the time-gap allowances of link_max_accel "
+        "and link_max_speed.",
+        minimum=0.1,
+        maximum=20.0,
+    ),
+    ParamSpec(
         "voxel_size",
         "float",
         0.2,
@@ -887,6 +914,7 @@ PAPER_PRESET: dict[str, Any] = {
     "static_suppression": False,
     "cluster_time": 0.0,
     "link_max_gap": 0.0,
+    "split_merged": False,
     "mid360_min_z": 3.5,
     "min_samples": 10,
     "cluster_voxel": 1.0,

@@ -44,6 +44,7 @@ from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
+from clusterfilter_ros.core.splitting import split_merged
 from clusterfilter_ros.core.trajectory import weighted_line
 
 #: Parameters whose change invalidates the accumulated state (voxel keys, filtering).
@@ -270,17 +271,22 @@ class StreamingDetector:
                 # Windows aligned to the stream's first stamp (deterministic), unless the
                 # stream's clock jumped so far that the offsets would not fit an int64.
                 t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
-                score = functools.partial(
+                scorer = functools.partial(
                     score_clusters,
-                    labels,
-                    xyz,
-                    t,
-                    n_clusters=k,
+                    xyz=xyz,
+                    t=t,
                     t0=t0,
                     min_track_seconds=p.stream_min_track_seconds,
                     structure_keys=self._static if p.static_suppression else None,
                 )
-                scores = score(p)
+                score = functools.partial(scorer, labels, n_clusters=k)
+                scores = score(params=p)
+                if p.split_merged:
+                    split_labels, split_k, was_split = split_merged(labels, xyz, t, scores, p)
+                    if was_split.any():
+                        labels, k = split_labels, split_k
+                        score = functools.partial(scorer, labels, n_clusters=k)
+                        scores = score(params=p)
                 chosen = select_clusters(scores, p)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.
@@ -301,7 +307,7 @@ class StreamingDetector:
                             # A hovering drone 10-20 m away leaves about as many frames in
                             # the history as hover_min_frames asks: once reported, fewer
                             # suffice.
-                            relaxed = score(p.copy(hover_min_frames=p.hover_keep_frames))
+                            relaxed = score(params=p.copy(hover_min_frames=p.hover_keep_frames))
                             self._keep_track(*where, relaxed, labels, xyz, t)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms

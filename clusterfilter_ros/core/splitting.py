@@ -1,0 +1,205 @@
+"""Split a cluster that joined several flying objects into kinematic tracks.
+
+Birds flying around a drone a few metres away touch its returns in the clusterer's 2 m
+space-time voxels, and the drone and the birds become one cluster that is too wide
+(``max_local_extent``) to be a drone. Such a cluster is taken apart the way a tracker
+would:
+
+1. its returns are grouped into frame samples (:func:`~.linking.frame_sample_ids`), and
+   within each sample into *return groups*: connected components of ``split_blob``
+   voxels, one object's returns in one sweep;
+2. the groups are tracked through the samples in time order. Each live track predicts its
+   position at the sample's time by a straight-line fit over its last
+   ``link_fit_window`` s of groups; a group within ``split_gate + link_max_accel dt^2 / 2``
+   (at most ``split_gate + link_max_speed dt``) of a prediction may continue that track,
+   and the pairing of tracks and groups that minimises the distances relative to these
+   reaches is taken (Hungarian assignment), so two objects side by side each keep their
+   own track. A track without a velocity yet (one sample) reaches
+   ``split_gate + min(link_max_speed dt, 2 link_gate)``. A track not continued for more
+   than ``link_max_gap`` ends; a group no track takes starts a new one;
+3. every track becomes a cluster of its own and is scored like any other.
+
+The loop runs over frame samples of the few clusters that are split, never over points.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
+from clusterfilter_ros.core.linking import frame_sample_ids
+from clusterfilter_ros.core.params import ParamSet
+
+if TYPE_CHECKING:
+    from clusterfilter_ros.core.scoring import ClusterScores
+
+_SAME_SAMPLE_OFFSETS = np.array(
+    [voxel.spacetime_offset_key((dx, dy, dz, 0)) for dx, dy, dz in voxel.HALF_OFFSETS],
+    dtype=np.int64,
+)
+_UNREACHABLE = 1e6
+
+
+def return_groups(
+    xyz: np.ndarray, t: np.ndarray, frame_period: float, blob: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(group id per point 0..G-1, frame sample of each group (G,)).
+
+    A group is a connected component (26-neighbourhood) of ``blob`` voxels holding
+    returns of one frame sample.
+    """
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    if t.size == 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    sample = frame_sample_ids(np.zeros(t.size, dtype=np.int64), t, frame_period)
+    keys = voxel.spacetime_keys(xyz, sample.astype(np.float64), blob, 1.0)
+    ukeys, inverse = np.unique(keys, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    comp = voxel_clusters(ukeys, np.ones(ukeys.size), 1.0, _SAME_SAMPLE_OFFSETS)
+    groups, n_groups = relabel_compact(comp[inverse])
+    group_sample = np.empty(n_groups, dtype=np.int64)
+    group_sample[groups] = sample
+    return groups, group_sample
+
+
+def _predictions(
+    track: np.ndarray,
+    g_t: np.ndarray,
+    g_p: np.ndarray,
+    live: np.ndarray,
+    last_t: np.ndarray,
+    last_p: np.ndarray,
+    now: float,
+    params: ParamSet,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted position at ``now`` (L, 3) and reach (L,) of each live track.
+
+    ``track``, ``g_t``, ``g_p``: track, time and position of the groups seen recently;
+    ``live``: the live tracks' ids; ``last_t`` / ``last_p``: every track's newest group.
+    """
+    slot = np.full(last_t.size, -1, dtype=np.int64)
+    slot[live] = np.arange(live.size)
+    mine = track >= 0
+    mine[mine] = slot[track[mine]] >= 0
+    mine[mine] = g_t[mine] >= last_t[track[mine]] - params.link_fit_window
+    c, tt, pp = slot[track[mine]], g_t[mine], g_p[mine]
+    n = np.bincount(c, minlength=live.size).astype(np.float64)
+    safe = np.maximum(n, 1.0)
+    tm = np.bincount(c, weights=tt, minlength=live.size) / safe
+    pm = np.stack([np.bincount(c, weights=pp[:, a], minlength=live.size) for a in range(3)], 1)
+    pm /= safe[:, None]
+    dt = tt - tm[c]
+    stt = np.bincount(c, weights=dt * dt, minlength=live.size)
+    stp = np.stack(
+        [np.bincount(c, weights=dt * (pp[:, a] - pm[c, a]), minlength=live.size) for a in range(3)],
+        axis=1,
+    )
+    moving = (n >= 2) & (stt > 1e-12)
+    velocity = stp / np.where(moving, stt, 1.0)[:, None]
+    centre = np.where(moving[:, None], pm + velocity * (now - tm)[:, None], last_p[live])
+    gap = now - last_t[live]
+    gate = params.split_gate
+    reach = np.where(
+        moving,
+        np.minimum(
+            gate + 0.5 * params.link_max_accel * gap * gap, gate + params.link_max_speed * gap
+        ),
+        gate + np.minimum(params.link_max_speed * gap, 2.0 * params.link_gate),
+    )
+    return centre, reach
+
+
+def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
+    """(N,) track label per point, 0..K-1; see the module docstring."""
+    xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    if t.size == 0:
+        return np.empty(0, dtype=np.int64)
+    groups, group_sample = return_groups(xyz, t, params.frame_period, params.split_blob)
+    n = np.bincount(groups).astype(np.float64)
+    order = np.lexsort((np.bincount(groups, weights=t) / n, group_sample))
+    # Groups in processing order: by frame sample, then time.
+    g_t = (np.bincount(groups, weights=t) / n)[order]
+    g_p = np.stack([np.bincount(groups, weights=xyz[:, a]) for a in range(3)], axis=1)
+    g_p = (g_p / n[:, None])[order]
+    bounds = np.flatnonzero(np.diff(group_sample[order])) + 1
+    starts = np.concatenate([[0], bounds])
+    ends = np.concatenate([bounds, [order.size]])
+    sample_t = np.add.reduceat(g_t, starts) / (ends - starts)
+    # Groups before this are too old to shape any live track's prediction.
+    lookback = params.link_max_gap + params.link_fit_window + params.frame_period
+    first = starts[np.searchsorted(sample_t, sample_t - lookback)]
+    track = np.full(order.size, -1, dtype=np.int64)
+    last_t = np.empty(order.size)
+    last_p = np.empty((order.size, 3))
+    n_tracks = 0
+    for a, b, now, lo in zip(starts, ends, sample_t, first, strict=True):
+        age = now - last_t[:n_tracks]
+        live = np.flatnonzero((age > 0) & (age <= params.link_max_gap))
+        if live.size:
+            centre, reach = _predictions(
+                track[lo:a],
+                g_t[lo:a],
+                g_p[lo:a],
+                live,
+                last_t[:n_tracks],
+                last_p[:n_tracks],
+                now,
+                params,
+            )
+            dist = np.linalg.norm(g_p[a:b][None, :, :] - centre[:, None, :], axis=2)
+            cost = np.where(dist <= reach[:, None], dist / reach[:, None], _UNREACHABLE)
+            rows, cols = linear_sum_assignment(cost)
+            taken = cost[rows, cols] < _UNREACHABLE
+            rows, cols = rows[taken], cols[taken] + a
+            track[cols] = live[rows]
+            last_t[live[rows]] = g_t[cols]
+            last_p[live[rows]] = g_p[cols]
+        new = a + np.flatnonzero(track[a:b] < 0)
+        track[new] = np.arange(n_tracks, n_tracks + new.size)
+        last_t[n_tracks : n_tracks + new.size] = g_t[new]
+        last_p[n_tracks : n_tracks + new.size] = g_p[new]
+        n_tracks += new.size
+    track_of_group = np.empty(order.size, dtype=np.int64)
+    track_of_group[order] = track
+    return track_of_group[groups]
+
+
+def merged_clusters(scores: ClusterScores, params: ParamSet) -> np.ndarray:
+    """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
+    high) and wider than ``max_local_extent`` in their local windows, with at least twice
+    ``min_cluster_points`` and at most ``max_cluster_points`` points."""
+    return np.nonzero(
+        (scores.local_extent > params.max_local_extent)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+        & (scores.n_points >= 2 * params.min_cluster_points)
+        & (scores.n_points <= params.max_cluster_points)
+    )[0]
+
+
+def split_merged(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, scores: ClusterScores, params: ParamSet
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """Labels with each of :func:`merged_clusters` replaced by its kinematic tracks.
+
+    Returns (compact labels, K, (N,) bool mask of the points that were in a split
+    cluster).
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    split = merged_clusters(scores, params)
+    k = int(labels.max()) + 1 if labels.size else 0
+    if split.size == 0:
+        return labels, k, np.zeros(labels.size, dtype=bool)
+    out = labels.copy()
+    next_label = k
+    for c in split:
+        member = np.nonzero(labels == c)[0]
+        tracks = kinematic_tracks(xyz[member], t[member], params)
+        out[member] = tracks + next_label
+        next_label += int(tracks.max()) + 1
+    labels_out, k_out = relabel_compact(out)
+    return labels_out, k_out, np.isin(labels, split)

@@ -1,0 +1,114 @@
+"""Splitting a cluster that joined a drone and the birds around it into kinematic tracks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from clusterfilter_ros.core.frame import AVIA, Frame
+from clusterfilter_ros.core.offline import detect_offline
+from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import score_clusters
+from clusterfilter_ros.core.splitting import kinematic_tracks, return_groups, split_merged
+
+
+def _drone(t: np.ndarray) -> np.ndarray:
+    """A drone crossing at 4 m/s, 25 m up."""
+    return np.stack([-12.0 + 4.0 * t, np.full_like(t, 30.0), np.full_like(t, 25.0)], axis=1)
+
+
+def _bird(t: np.ndarray, radius: float, omega: float, phase: float) -> np.ndarray:
+    """A bird circling the drone at ``radius`` m, ``omega`` rad/s."""
+    ang = omega * t + phase
+    return _drone(t) + np.stack([radius * np.cos(ang), radius * np.sin(ang), np.ones_like(t)], 1)
+
+
+def _merged_scene(seed: int = 0, duration: float = 8.0):
+    """(xyz, t, is_drone) of a drone and two birds circling it, 3 returns each per frame."""
+    rng = np.random.default_rng(seed)
+    stamps = np.arange(0.0, duration, 0.1)
+    objects = [_drone(stamps), _bird(stamps, 3.5, 1.1, 0.0), _bird(stamps, 5.0, -0.8, 2.0)]
+    xyz, t, drone = [], [], []
+    for i, path in enumerate(objects):
+        xyz.append(np.repeat(path, 3, axis=0) + rng.normal(0, 0.1, (3 * stamps.size, 3)))
+        t.append(np.repeat(stamps, 3))
+        drone.append(np.full(3 * stamps.size, i == 0))
+    return np.concatenate(xyz), np.concatenate(t), np.concatenate(drone)
+
+
+def test_return_groups_are_per_object_and_per_frame_sample():
+    t = np.array([0.0, 0.0, 0.0, 0.0, 0.1, 0.1])
+    xyz = np.array(
+        [[0, 0, 10], [0.3, 0, 10], [5, 0, 10], [5.2, 0, 10], [0, 0, 10], [0.2, 0, 10]], float
+    )
+    groups, group_sample = return_groups(xyz, t, 0.1, 1.0)
+    assert groups[0] == groups[1]
+    assert groups[2] == groups[3] != groups[0]
+    assert groups[4] == groups[5] != groups[0]  # same place, next frame: a new group
+    assert group_sample[groups[4]] == group_sample[groups[0]] + 1
+
+
+def test_drone_keeps_one_track_among_circling_birds():
+    xyz, t, drone = _merged_scene()
+    tracks = kinematic_tracks(xyz, t, detector_params())
+    drone_track = np.bincount(tracks[drone]).argmax()
+    mine = tracks == drone_track
+    assert np.count_nonzero(mine & drone) / np.count_nonzero(drone) > 0.95
+    assert np.count_nonzero(mine & ~drone) == 0
+
+
+def test_tracks_of_an_empty_cloud():
+    assert kinematic_tracks(np.empty((0, 3)), np.empty(0), detector_params()).size == 0
+
+
+def test_only_wide_clusters_are_split_and_the_drone_piece_scores():
+    params = detector_params()
+    xyz, t, drone = _merged_scene()
+    # One merged cluster, and a lone drone-like object far away that must stay whole.
+    lone = _drone(np.repeat(np.arange(0.0, 8.0, 0.1), 3)) + np.array([0.0, 200.0, 0.0])
+    xyz = np.vstack([xyz, lone])
+    t = np.concatenate([t, np.repeat(np.arange(0.0, 8.0, 0.1), 3)])
+    labels = np.concatenate([np.zeros(drone.size, np.int64), np.ones(lone.shape[0], np.int64)])
+    before = score_clusters(labels, xyz, t, params, n_clusters=2)
+    assert before.local_extent[0] > params.max_local_extent
+    assert not before.candidate[0]  # too wide to be one object
+
+    out, k, was_split = split_merged(labels, xyz, t, before, params)
+    assert was_split[: drone.size].all() and not was_split[drone.size :].any()
+    lone_label = np.unique(out[drone.size :])
+    assert lone_label.size == 1
+    after = score_clusters(out, xyz, t, params, n_clusters=k)
+    drone_label = np.bincount(out[: drone.size][drone]).argmax()
+    assert after.candidate[drone_label]
+    assert after.confidence[drone_label] >= params.min_confidence
+
+
+def test_split_merged_leaves_labels_alone_when_nothing_is_wide():
+    params = detector_params()
+    xyz = _drone(np.repeat(np.arange(0.0, 6.0, 0.1), 3))
+    t = np.repeat(np.arange(0.0, 6.0, 0.1), 3)
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    out, k, was_split = split_merged(labels, xyz, t, scores, params)
+    assert k == 1 and (out == labels).all() and not was_split.any()
+
+
+def test_offline_finds_the_drone_among_circling_birds_only_when_splitting():
+    xyz, t, drone = _merged_scene(seed=3, duration=10.0)
+    frames = [
+        Frame(1000.0 + s, AVIA, xyz[np.isclose(t, s)].astype(np.float32)) for s in np.unique(t)
+    ]
+    truth = _drone(np.unique(t))
+
+    def errors(split: bool) -> np.ndarray:
+        result = detect_offline(frames, detector_params({"split_merged": split}))
+        est = result.estimates
+        if len(est) == 0:
+            return np.empty(0)
+        return np.linalg.norm(
+            est.xyz - truth[np.searchsorted(np.unique(t) + 1000.0, est.stamps)], axis=1
+        )
+
+    assert errors(False).size == 0
+    err = errors(True)
+    assert err.size >= 0.6 * np.unique(t).size
+    assert np.median(err) < 0.5
