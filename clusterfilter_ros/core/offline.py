@@ -162,7 +162,7 @@ def detect_offline(
     scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
     was_split = None
     if params.split_merged:
-        labels, k, was_split = split_merged(labels, xyz, t, scores, params)
+        labels, k, was_split = split_merged(labels, xyz, t, scores, params, structure)
         if was_split.any():
             scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
     selected = select_clusters(scores, params)

@@ -19,12 +19,15 @@ would:
    than ``link_max_gap`` ends; a group no track takes starts a new one;
 3. every track becomes a cluster of its own and is scored like any other.
 
+Only flying clusters are split (centroid above ``min_centroid_z``), and, when the static
+structure is known, only those with at most :data:`MAX_CONTACT` of their points in or
+next to its voxels: what suppression leaves of walls and crowns is often wide, and
+splitting it costs time and finds nothing.
+
 The loop runs over frame samples of the few clusters that are split, never over points.
 """
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -33,15 +36,15 @@ from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
 from clusterfilter_ros.core.linking import frame_sample_ids
 from clusterfilter_ros.core.params import ParamSet
-
-if TYPE_CHECKING:
-    from clusterfilter_ros.core.scoring import ClusterScores
+from clusterfilter_ros.core.scoring import ClusterScores, structure_contact
 
 _SAME_SAMPLE_OFFSETS = np.array(
     [voxel.spacetime_offset_key((dx, dy, dz, 0)) for dx, dy, dz in voxel.HALF_OFFSETS],
     dtype=np.int64,
 )
 _UNREACHABLE = 1e6
+#: Largest share of a cluster's points in or next to static structure for it to be split.
+MAX_CONTACT = 0.1
 
 
 def return_groups(
@@ -171,8 +174,10 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
 
 def merged_clusters(scores: ClusterScores, params: ParamSet) -> np.ndarray:
     """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
-    high) and wider than ``max_local_extent`` in their local windows, with at least twice
-    ``min_cluster_points`` and at most ``max_cluster_points`` points."""
+    high), moving as a whole (motion coherence above ``coherence_floor``: what is left of
+    walls and trees after static suppression is not) and wider than ``max_local_extent``
+    in their local windows, with at least twice ``min_cluster_points`` and at most
+    ``max_cluster_points`` points."""
     return np.nonzero(
         (scores.local_extent > params.max_local_extent)
         & (scores.centroid[:, 2] >= params.min_centroid_z)
@@ -182,16 +187,32 @@ def merged_clusters(scores: ClusterScores, params: ParamSet) -> np.ndarray:
 
 
 def split_merged(
-    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, scores: ClusterScores, params: ParamSet
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    params: ParamSet,
+    structure_keys: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """Labels with each of :func:`merged_clusters` replaced by its kinematic tracks.
 
-    Returns (compact labels, K, (N,) bool mask of the points that were in a split
+    With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
+    cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
+    left whole: what static suppression left of a wall or a tree, not objects in the
+    air. Returns (compact labels, K, (N,) bool mask of the points that were in a split
     cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
     split = merged_clusters(scores, params)
     k = int(labels.max()) + 1 if labels.size else 0
+    if split.size and structure_keys is not None and structure_keys.size:
+        which = np.zeros(k, dtype=bool)
+        which[split] = True
+        member = labels >= 0
+        contact = structure_contact(
+            labels[member], xyz[member], k, which, structure_keys, float(params.static_voxel)
+        )
+        split = split[contact[split] <= MAX_CONTACT]
     if split.size == 0:
         return labels, k, np.zeros(labels.size, dtype=bool)
     out = labels.copy()

@@ -271,18 +271,21 @@ class StreamingDetector:
                 # Windows aligned to the stream's first stamp (deterministic), unless the
                 # stream's clock jumped so far that the offsets would not fit an int64.
                 t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
+                structure = self._static if p.static_suppression else None
                 scorer = functools.partial(
                     score_clusters,
                     xyz=xyz,
                     t=t,
                     t0=t0,
                     min_track_seconds=p.stream_min_track_seconds,
-                    structure_keys=self._static if p.static_suppression else None,
+                    structure_keys=structure,
                 )
                 score = functools.partial(scorer, labels, n_clusters=k)
                 scores = score(params=p)
                 if p.split_merged:
-                    split_labels, split_k, was_split = split_merged(labels, xyz, t, scores, p)
+                    split_labels, split_k, was_split = split_merged(
+                        labels, xyz, t, scores, p, structure
+                    )
                     if was_split.any():
                         labels, k = split_labels, split_k
                         score = functools.partial(scorer, labels, n_clusters=k)

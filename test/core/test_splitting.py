@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.frame import AVIA, Frame
 from clusterfilter_ros.core.offline import detect_offline
 from clusterfilter_ros.core.params import detector_params
@@ -112,3 +113,18 @@ def test_offline_finds_the_drone_among_circling_birds_only_when_splitting():
     err = errors(True)
     assert err.size >= 0.6 * np.unique(t).size
     assert np.median(err) < 0.5
+
+
+def test_a_wide_cluster_against_static_structure_is_left_whole():
+    params = detector_params()
+    xyz, t, drone = _merged_scene()
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    # The same cloud, but every point lies in a voxel of suppressed structure.
+    structure = np.unique(voxel.voxel_keys(xyz, params.static_voxel))
+    out, k, was_split = split_merged(labels, xyz, t, scores, params, structure)
+    assert k == 1 and not was_split.any()
+    # Structure elsewhere changes nothing.
+    far = np.unique(voxel.voxel_keys(xyz + 500.0, params.static_voxel))
+    out, k, was_split = split_merged(labels, xyz, t, scores, params, far)
+    assert k > 1 and was_split.all()
