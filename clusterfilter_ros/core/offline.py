@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -36,7 +37,7 @@ from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragme
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
-from clusterfilter_ros.core.splitting import split_merged
+from clusterfilter_ros.core.splitting import split_and_score
 from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory, merge_trajectories
 
 
@@ -159,12 +160,18 @@ def detect_offline(
         static, structure = static_offline(xyz, t, params)
         xyz, t = xyz[~static], t[~static]
     labels, k = global_clusters(xyz, t, params)
-    scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
+    # Fixed window origins: the pieces of a split cluster are scored alone.
+    labelled = labels >= 0
+    origin = float(t[labelled].min()) if labelled.any() else None
+    score = functools.partial(
+        score_clusters, t0=origin, coherence_origin=origin, structure_keys=structure
+    )
+    scores = score(labels, xyz, t, params, n_clusters=k)
     was_split = None
     if params.split_merged:
-        labels, k, was_split = split_merged(labels, xyz, t, scores, params, structure)
-        if was_split.any():
-            scores = score_clusters(labels, xyz, t, params, n_clusters=k, structure_keys=structure)
+        labels, k, scores, was_split = split_and_score(
+            labels, xyz, t, scores, params, score, structure
+        )
     selected = select_clusters(scores, params)
     rows = scores.rows()
     for row in rows:

@@ -93,6 +93,18 @@ class ClusterScores:
         return out
 
 
+def select_and_append(
+    scores: ClusterScores, keep: np.ndarray, more: ClusterScores
+) -> ClusterScores:
+    """The clusters ``keep`` of ``scores`` (in that order), followed by those of ``more``."""
+    return ClusterScores(
+        **{
+            f.name: np.concatenate([getattr(scores, f.name)[keep], getattr(more, f.name)])
+            for f in fields(ClusterScores)
+        }
+    )
+
+
 def _empty(k: int) -> ClusterScores:
     z = np.zeros(k)
     return ClusterScores(
@@ -236,8 +248,15 @@ def score_clusters(
     t0: float | None = None,
     min_track_seconds: float | None = None,
     structure_keys: np.ndarray | None = None,
+    coherence_origin: float | None = None,
 ) -> ClusterScores:
     """Features, gates and scores of clusters ``0..n_clusters-1``.
+
+    Local windows start at ``t0`` (default: the earliest labelled stamp); the motion
+    coherence windows at ``coherence_origin`` (default: the earliest labelled stamp,
+    even when ``t0`` is given; aligning them to a streaming ``t0`` was measured and not
+    taken, docs/detector.md deviation 34). Scores are per cluster: scoring a subset of
+    the clusters alone gives the same values when both origins are given.
 
     ``structure_keys``: sorted ``static_voxel`` keys of the suppressed static structure;
     a cluster is taken for a hovering drone only if at most ``hover_max_contact`` of its
@@ -326,7 +345,9 @@ def score_clusters(
             sums["sum_log_inv_iou"] / npairs / np.log(1.0 / float(params.iou_floor)),
             0.0,
         )
-        res.coherence = motion_coherence(lab, pts, tt, k, float(params.coherence_window))
+        res.coherence = motion_coherence(
+            lab, pts, tt, k, float(params.coherence_window), coherence_origin
+        )
         lo = min(float(params.coherence_floor), float(params.min_coherence) - 1e-6)
         coherent = np.clip((res.coherence - lo) / (float(params.min_coherence) - lo), 0.0, 1.0)
         span = np.maximum(res.t_last - res.t_first, fp)
@@ -427,11 +448,17 @@ def _gates(res: ClusterScores, counts: np.ndarray, params: ParamSet) -> np.ndarr
 
 
 def motion_coherence(
-    lab: np.ndarray, pts: np.ndarray, t: np.ndarray, k: int, window: float
+    lab: np.ndarray,
+    pts: np.ndarray,
+    t: np.ndarray,
+    k: int,
+    window: float,
+    origin: float | None = None,
 ) -> np.ndarray:
     """1 - (mean distance to the window centroid) / (mean distance to the cluster centroid).
 
-    Windows are ``window`` seconds long. A moving object's points are close to the
+    Windows are ``window`` seconds long, counted from ``origin`` (default: the earliest
+    stamp in ``t``). A moving object's points are close to the
     centroid of their own time window and far from the overall centroid (coherence near
     1); a static object's windows all sample the same place (near 0). Clusters seen in
     a single window get 0: no evidence of motion.
@@ -444,7 +471,8 @@ def motion_coherence(
         np.stack([np.bincount(lab, weights=pts[:, a], minlength=k) for a in range(3)], axis=1)
         / np.maximum(counts, 1.0)[:, None]
     )
-    win = np.floor((t - t.min()) / window).astype(np.int64)
+    win = np.floor((t - (t.min() if origin is None else origin)) / window).astype(np.int64)
+    win -= win.min()
     n_win = int(win.max()) + 1
     cw_u, cw_inv = np.unique(lab * n_win + win, return_inverse=True)
     cw_inv = cw_inv.reshape(-1)

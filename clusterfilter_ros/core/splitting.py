@@ -29,6 +29,8 @@ The loop runs over frame samples of the few clusters that are split, never over 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
@@ -36,7 +38,7 @@ from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
 from clusterfilter_ros.core.linking import frame_sample_ids
 from clusterfilter_ros.core.params import ParamSet
-from clusterfilter_ros.core.scoring import ClusterScores, structure_contact
+from clusterfilter_ros.core.scoring import ClusterScores, select_and_append, structure_contact
 
 _SAME_SAMPLE_OFFSETS = np.array(
     [voxel.spacetime_offset_key((dx, dy, dz, 0)) for dx, dy, dz in voxel.HALF_OFFSETS],
@@ -224,3 +226,37 @@ def split_merged(
         next_label += int(tracks.max()) + 1
     labels_out, k_out = relabel_compact(out)
     return labels_out, k_out, np.isin(labels, split)
+
+
+#: ``score(labels, xyz, t, params, n_clusters=K)``: scores of clusters 0..K-1.
+Scorer = Callable[..., ClusterScores]
+
+
+def split_and_score(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    params: ParamSet,
+    score: Scorer,
+    structure_keys: np.ndarray | None = None,
+) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
+    """:func:`split_merged`, then the scores of the new labels.
+
+    Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
+    window origin, ``t0``); the clusters left whole keep theirs. Returns (labels, K,
+    scores, mask of the points that were in a split cluster).
+    """
+    out, k, was_split = split_merged(labels, xyz, t, scores, params, structure_keys)
+    if not was_split.any():
+        return out, k, scores, was_split
+    # relabel_compact keeps the order: the clusters left whole come first, then pieces.
+    kept = np.setdiff1d(np.arange(len(scores)), np.unique(labels[was_split]))
+    pieces = score(
+        out[was_split] - kept.size,
+        xyz[was_split],
+        t[was_split],
+        params,
+        n_clusters=k - kept.size,
+    )
+    return out, k, select_and_append(scores, kept, pieces), was_split

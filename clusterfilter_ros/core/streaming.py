@@ -44,7 +44,7 @@ from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
-from clusterfilter_ros.core.splitting import split_merged
+from clusterfilter_ros.core.splitting import split_and_score
 from clusterfilter_ros.core.trajectory import weighted_line
 
 #: Parameters whose change invalidates the accumulated state (voxel keys, filtering).
@@ -272,24 +272,20 @@ class StreamingDetector:
                 # stream's clock jumped so far that the offsets would not fit an int64.
                 t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
                 structure = self._static if p.static_suppression else None
+                first = float(t[labels >= 0].min())
                 scorer = functools.partial(
                     score_clusters,
-                    xyz=xyz,
-                    t=t,
-                    t0=t0,
+                    t0=t0 if t0 is not None else first,
+                    coherence_origin=first,
                     min_track_seconds=p.stream_min_track_seconds,
                     structure_keys=structure,
                 )
-                score = functools.partial(scorer, labels, n_clusters=k)
-                scores = score(params=p)
+                scores = scorer(labels, xyz, t, p, n_clusters=k)
                 if p.split_merged:
-                    split_labels, split_k, was_split = split_merged(
-                        labels, xyz, t, scores, p, structure
+                    labels, k, scores, _ = split_and_score(
+                        labels, xyz, t, scores, p, scorer, structure
                     )
-                    if was_split.any():
-                        labels, k = split_labels, split_k
-                        score = functools.partial(scorer, labels, n_clusters=k)
-                        scores = score(params=p)
+                score = functools.partial(scorer, labels, xyz, t, n_clusters=k)
                 chosen = select_clusters(scores, p)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.

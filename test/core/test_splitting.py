@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+
 import numpy as np
 
 from clusterfilter_ros.core import voxel
@@ -9,7 +12,12 @@ from clusterfilter_ros.core.frame import AVIA, Frame
 from clusterfilter_ros.core.offline import detect_offline
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters
-from clusterfilter_ros.core.splitting import kinematic_tracks, return_groups, split_merged
+from clusterfilter_ros.core.splitting import (
+    kinematic_tracks,
+    return_groups,
+    split_and_score,
+    split_merged,
+)
 
 
 def _drone(t: np.ndarray) -> np.ndarray:
@@ -128,3 +136,20 @@ def test_a_wide_cluster_against_static_structure_is_left_whole():
     far = np.unique(voxel.voxel_keys(xyz + 500.0, params.static_voxel))
     out, k, was_split = split_merged(labels, xyz, t, scores, params, far)
     assert k > 1 and was_split.all()
+
+
+def test_only_the_pieces_are_scored_again_and_match_a_full_rescoring():
+    params = detector_params()
+    xyz, t, drone = _merged_scene()
+    lone = _drone(np.repeat(np.arange(0.0, 8.0, 0.1), 3)) + np.array([0.0, 200.0, 0.0])
+    xyz = np.vstack([lone, xyz])
+    t = np.concatenate([np.repeat(np.arange(0.0, 8.0, 0.1), 3), t + 0.03])
+    labels = np.concatenate([np.zeros(lone.shape[0], np.int64), np.ones(drone.size, np.int64)])
+    origin = float(t.min())
+    score = functools.partial(score_clusters, t0=origin, coherence_origin=origin)
+    before = score(labels, xyz, t, params, n_clusters=2)
+    out, k, scores, was_split = split_and_score(labels, xyz, t, before, params, score)
+    assert k > 2 and was_split[lone.shape[0] :].all()
+    full = score(out, xyz, t, params, n_clusters=k)
+    for f in dataclasses.fields(full):
+        assert np.allclose(getattr(scores, f.name), getattr(full, f.name), equal_nan=True), f.name
