@@ -127,13 +127,72 @@ def _line_fits(
     return tm, pm, vel, has_v
 
 
+def _linkable(
+    aa: np.ndarray,
+    b: np.ndarray,
+    t_first: np.ndarray,
+    t_last: np.ndarray,
+    end_pos: np.ndarray,
+    start_pos: np.ndarray,
+    v_e: np.ndarray,
+    v_s: np.ndarray,
+    has_e: np.ndarray,
+    has_s: np.ndarray,
+    speed_e: np.ndarray,
+    speed_s: np.ndarray,
+    params: ParamSet,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The candidate pairs (a, b) that may link, and their costs."""
+    fp = float(params.frame_period)
+    gap = float(params.link_max_gap)
+    dt = t_first[b] - t_last[aa]
+    adt = np.abs(dt)
+    known_a, known_b = has_e[aa], has_s[b]
+    any_v = known_a | known_b
+    reach = linking_reach(adt, params)
+    plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
+    # Two fragments without a velocity link only across one frame period: chains
+    # of single sparse returns (far structure, noise) would otherwise form. And
+    # carried by a velocity v over dt, an end gets at most |v| dt closer to a start:
+    # pairs farther apart than that plus the reach cannot link (most of a scene).
+    speed = np.maximum(np.where(known_a, speed_e[aa], 0.0), np.where(known_b, speed_s[b], 0.0))
+    near = (any_v | (adt <= fp + 1e-6)) & (plain - speed * adt <= reach + 1e-6)
+    aa, b, dt, adt, known_a, known_b, any_v, reach, plain = (
+        x[near] for x in (aa, b, dt, adt, known_a, known_b, any_v, reach, plain)
+    )
+    fwd = np.linalg.norm(end_pos[aa] + v_e[aa] * dt[:, None] - start_pos[b], axis=-1)
+    back = np.linalg.norm(start_pos[b] - v_s[b] * dt[:, None] - end_pos[aa], axis=-1)
+    dist = np.where(known_a, fwd, np.inf)
+    dist = np.minimum(dist, np.where(known_b, back, np.inf))
+    dist = np.where(any_v, dist, plain)
+    ok = dist <= reach
+    # Distance relative to the reach, plus the gap relative to link_max_gap: the next
+    # fragment in time comes first (by distance alone, the reach growing with the gap
+    # would let A skip over B to C, leaving B alone).
+    return aa[ok], b[ok], dist[ok] / reach[ok] + adt[ok] / gap
+
+
+def chains_formed(before: np.ndarray, after: np.ndarray, k_after: int) -> np.ndarray:
+    """(K_after,) bool: the clusters of ``after`` that joined several of ``before``."""
+    keep = before >= 0
+    pairs = np.unique(after[keep] * (int(before.max()) + 1) + before[keep])
+    return np.bincount(pairs // (int(before.max()) + 1), minlength=k_after) > 1
+
+
 def link_fragments(
-    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    params: ParamSet,
+    active: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """Relabel so that linked fragments share one label; returns (labels, K).
 
     ``labels`` must be compact (0..K-1, -1 noise). With ``link_max_gap`` 0 the labels
-    are returned unchanged.
+    are returned unchanged. ``active`` (K,) bool: only pairs with at least one active
+    cluster are considered. After a round, the clusters that took part in no link can
+    only link to a chain formed in it (:func:`chains_formed`): a pair of them that could
+    link had both ends free when the greedy pass reached it, and would have been taken.
     """
     labels = np.asarray(labels, dtype=np.int64)
     k = int(labels.max()) + 1 if labels.size else 0
@@ -170,57 +229,57 @@ def link_fragments(
     speed_e = np.linalg.norm(v_e, axis=1)
     speed_s = np.linalg.norm(v_s, axis=1)
     idx = np.nonzero(eligible)[0]
-    order = idx[np.argsort(t_first[idx], kind="stable")]
-    starts = t_first[order]
-    # Successor candidates of a: clusters starting in [t_last(a) - fp, t_last(a) + gap].
-    first_all = np.searchsorted(starts, t_last[idx] - fp, side="left")
-    last_all = np.searchsorted(starts, t_last[idx] + gap, side="right")
+    if active is None:
+        row_sets = [(idx, idx)]
+    else:
+        act = idx[np.asarray(active, dtype=bool)[idx]]
+        # Active rows with every column, then the other rows with active columns only.
+        row_sets = [(act, idx), (idx[~np.asarray(active, dtype=bool)[idx]], act)]
     pairs_a, pairs_b, pairs_cost = [], [], []
-    lo = 0
-    while lo < idx.size:
-        # Blocks of rows x candidate columns bounded to about _BLOCK_CELLS entries.
-        width = int((last_all[lo : lo + _BLOCK] - first_all[lo : lo + _BLOCK]).max())
-        rows = max(1, min(_BLOCK, _BLOCK_CELLS // max(width, 1)))
-        a = idx[lo : lo + rows]
-        first, last = first_all[lo : lo + rows], last_all[lo : lo + rows]
-        lo += rows
-        width = int((last - first).max())
-        if width <= 0:
+    for rows_idx, cols_idx in row_sets:
+        if rows_idx.size == 0 or cols_idx.size == 0:
             continue
-        j = first[:, None] + np.arange(width)[None, :]
-        valid = j < last[:, None]
-        b = order[np.minimum(j, order.size - 1)]
-        aa = np.broadcast_to(a[:, None], b.shape)
-        valid &= b != aa
-        valid &= t_first[b] > t_first[aa]  # B must start after A started
-        aa, b = aa[valid], b[valid]
-        dt = t_first[b] - t_last[aa]
-        adt = np.abs(dt)
-        known_a, known_b = has_e[aa], has_s[b]
-        any_v = known_a | known_b
-        reach = linking_reach(adt, params)
-        plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
-        # Two fragments without a velocity link only across one frame period: chains
-        # of single sparse returns (far structure, noise) would otherwise form. And
-        # carried by a velocity v over dt, an end gets at most |v| dt closer to a start:
-        # pairs farther apart than that plus the reach cannot link (most of a scene).
-        speed = np.maximum(np.where(known_a, speed_e[aa], 0.0), np.where(known_b, speed_s[b], 0.0))
-        near = (any_v | (adt <= fp + 1e-6)) & (plain - speed * adt <= reach + 1e-6)
-        aa, b, dt, adt, known_a, known_b, any_v, reach, plain = (
-            x[near] for x in (aa, b, dt, adt, known_a, known_b, any_v, reach, plain)
-        )
-        fwd = np.linalg.norm(end_pos[aa] + v_e[aa] * dt[:, None] - start_pos[b], axis=-1)
-        back = np.linalg.norm(start_pos[b] - v_s[b] * dt[:, None] - end_pos[aa], axis=-1)
-        dist = np.where(known_a, fwd, np.inf)
-        dist = np.minimum(dist, np.where(known_b, back, np.inf))
-        dist = np.where(any_v, dist, plain)
-        ok = dist <= reach
-        pairs_a.append(aa[ok])
-        pairs_b.append(b[ok])
-        # Distance relative to the reach, plus the gap relative to link_max_gap: the next
-        # fragment in time comes first (by distance alone, the reach growing with the gap
-        # would let A skip over B to C, leaving B alone).
-        pairs_cost.append(dist[ok] / reach[ok] + adt[ok] / gap)
+        order = cols_idx[np.argsort(t_first[cols_idx], kind="stable")]
+        starts = t_first[order]
+        # Successor candidates of a: clusters starting in [t_last(a) - fp, t_last(a) + gap].
+        first_all = np.searchsorted(starts, t_last[rows_idx] - fp, side="left")
+        last_all = np.searchsorted(starts, t_last[rows_idx] + gap, side="right")
+        lo = 0
+        while lo < rows_idx.size:
+            # Blocks of rows x candidate columns bounded to about _BLOCK_CELLS entries.
+            width = int((last_all[lo : lo + _BLOCK] - first_all[lo : lo + _BLOCK]).max())
+            rows = max(1, min(_BLOCK, _BLOCK_CELLS // max(width, 1)))
+            a = rows_idx[lo : lo + rows]
+            first, last = first_all[lo : lo + rows], last_all[lo : lo + rows]
+            lo += rows
+            width = int((last - first).max())
+            if width <= 0:
+                continue
+            j = first[:, None] + np.arange(width)[None, :]
+            valid = j < last[:, None]
+            b = order[np.minimum(j, order.size - 1)]
+            aa = np.broadcast_to(a[:, None], b.shape)
+            valid &= b != aa
+            valid &= t_first[b] > t_first[aa]  # B must start after A started
+            aa, b = aa[valid], b[valid]
+            found = _linkable(
+                aa,
+                b,
+                t_first,
+                t_last,
+                end_pos,
+                start_pos,
+                v_e,
+                v_s,
+                has_e,
+                has_s,
+                speed_e,
+                speed_s,
+                params,
+            )
+            pairs_a.append(found[0])
+            pairs_b.append(found[1])
+            pairs_cost.append(found[2])
     if not pairs_a:
         return labels, k
     pa, pb, cost = (np.concatenate(x) for x in (pairs_a, pairs_b, pairs_cost))

@@ -33,7 +33,12 @@ from clusterfilter_ros.core.clustering import (
 )
 from clusterfilter_ros.core.estimate import reported_positions
 from clusterfilter_ros.core.frame import Frame, TimedPositions
-from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragments
+from clusterfilter_ros.core.linking import (
+    chains_formed,
+    extend_track,
+    fill_track,
+    link_fragments,
+)
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
@@ -109,11 +114,13 @@ def global_clusters(
     if params.hover_detection:
         labels, k = merge_colocated_compact(labels, xyz, params.hover_max_extent)
     if params.link_max_gap > 0:
+        active = None  # the first round considers every pair, later ones new chains only
         for _ in range(int(params.link_passes if passes is None else passes)):
-            before = k
-            labels, k = link_fragments(labels, xyz, t, params)
-            if k == before:
+            before, k_before = labels, k
+            labels, k = link_fragments(labels, xyz, t, params, active)
+            if k == k_before:
                 break
+            active = chains_formed(before, labels, k)
     return labels, k
 
 

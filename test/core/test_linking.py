@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clusterfilter_ros.core.linking import extend_track, fill_track, link_fragments
+from clusterfilter_ros.core.clustering import relabel_compact
+from clusterfilter_ros.core.linking import (
+    chains_formed,
+    extend_track,
+    fill_track,
+    link_fragments,
+)
 from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import group_median, score_clusters
@@ -309,3 +315,49 @@ def test_frame_samples_follow_the_gaps_between_returns_not_a_time_grid():
     keep = cid2 < 2
     assert cid2[keep].tolist() == cid.tolist() and n2[keep].tolist() == n.tolist()
     assert np.allclose(ts2[keep], ts)
+
+
+def test_chains_formed_marks_the_clusters_that_joined_several():
+    before = np.array([0, 0, 1, 2, 3, -1, 4])
+    after = np.array([0, 0, 0, 1, 2, -1, 2])
+    assert chains_formed(before, after, 3).tolist() == [True, False, True]
+
+
+def test_later_rounds_over_new_chains_only_link_as_rounds_over_every_pair():
+    # Many objects, each broken into bursts, some bursts single frames: rounds 2+ that
+    # look only at pairs with a chain formed in the round before give the same labels as
+    # rounds over every pair.
+    rng = np.random.default_rng(4)
+    parts = []
+    for i in range(12):
+        speed = rng.uniform(-9, 9, 3) * np.array([1.0, 1.0, 0.2])
+        origin = rng.uniform(-60, 60, 3) + np.array([0.0, 0.0, 80.0])
+        # Two single frames, a 1 s burst, single frames 0.4-0.6 s apart, another burst.
+        # As in the test above, a single frame joins only once the fragment next to it
+        # is part of a chain with a velocity: after the burst (a chain before a single
+        # frame) and before it (a single frame before a chain).
+        first = rng.uniform(1.5, 3.0)
+        singles = np.concatenate(
+            [[first - 1.0, first - 0.5], first + 1.0 + np.cumsum(rng.uniform(0.4, 0.6, 4))]
+        )
+        bursts = [first, singles[-1] + 0.5]
+        starts = np.sort(np.concatenate([singles, bursts]))
+        xyz, t, lab = _fragments(rng, starts, length=1.0, speed=speed, origin=origin)
+        burst_labels = np.searchsorted(starts, bursts)
+        keep = np.isin(lab, burst_labels) | np.isin(np.round(t, 6), np.round(singles, 6))
+        parts.append((xyz[keep], t[keep], lab[keep] + 10 * i))
+    xyz = np.concatenate([p[0] for p in parts])
+    t = np.concatenate([p[1] for p in parts])
+    labels, k = relabel_compact(np.concatenate([p[2] for p in parts]))
+    params = detector_params()
+    every, k_every, rounds = labels, k, 0
+    while True:
+        nxt, k_next = link_fragments(every, xyz, t, params)
+        if k_next == k_every:
+            break
+        every, k_every, rounds = nxt, k_next, rounds + 1
+    assert rounds >= 2  # the case needs later rounds
+    new_only, k_new = global_clusters(xyz, t, params.copy(link_passes=20))
+    # Same partition of the points (label numbers may differ).
+    pairs = np.unique(np.stack([every, new_only]), axis=1)
+    assert k_new == k_every and pairs.shape[1] == k_every + (every < 0).any()
