@@ -63,6 +63,15 @@ def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray
     return static_keys[small[comp]]
 
 
+def suppressed_keys(persistent: np.ndarray, params: ParamSet) -> np.ndarray:
+    """Sorted keys of the voxels to suppress, from the sorted keys of the persistent ones:
+    without the small isolated groups (a hovering drone; with ``hover_detection``), then
+    dilated by ``static_dilation`` voxels. Offline and streaming share this step."""
+    if params.hover_detection:
+        persistent = np.setdiff1d(persistent, compact_static_keys(persistent, params))
+    return _dilate(persistent, params.static_dilation)
+
+
 def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
     """(N,) bool: points in voxels occupied in >= static_min_bins time bins of the sequence."""
     return static_offline(xyz, t, params)[0]
@@ -83,10 +92,7 @@ def static_offline(
     n_bins = int(bins.max()) + 1
     pairs = np.unique(kinv * n_bins + bins)
     bins_per_voxel = np.bincount(pairs // n_bins, minlength=ukeys.size)
-    static_keys = ukeys[bins_per_voxel >= params.static_min_bins]
-    if params.hover_detection:
-        static_keys = np.setdiff1d(static_keys, compact_static_keys(static_keys, params))
-    static_keys = _dilate(static_keys, params.static_dilation)
+    static_keys = suppressed_keys(ukeys[bins_per_voxel >= params.static_min_bins], params)
     return voxel.lookup(static_keys, keys) >= 0, static_keys
 
 
@@ -152,10 +158,9 @@ class BackgroundGrid:
 
     def static_keys(self) -> np.ndarray:
         """Sorted keys of the voxels currently considered static (dilated as configured)."""
-        static = self.keys[_popcount(self.masks) >= self.params.static_min_bins]
-        if self.params.hover_detection:
-            static = np.setdiff1d(static, compact_static_keys(static, self.params))
-        return _dilate(static, self.params.static_dilation)
+        return suppressed_keys(
+            self.keys[_popcount(self.masks) >= self.params.static_min_bins], self.params
+        )
 
     @property
     def nbytes(self) -> int:
