@@ -29,6 +29,8 @@ alone, so a drone track can never be joined to them.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from clusterfilter_ros.core.params import ParamSet
@@ -127,22 +129,27 @@ def _line_fits(
     return tm, pm, vel, has_v
 
 
+class _Ends(NamedTuple):
+    """Per cluster: first / last stamp, start / end position and velocity (with whether
+    the velocity is known, and its norm)."""
+
+    t_first: np.ndarray
+    t_last: np.ndarray
+    start_pos: np.ndarray
+    end_pos: np.ndarray
+    v_s: np.ndarray
+    v_e: np.ndarray
+    has_s: np.ndarray
+    has_e: np.ndarray
+    speed_s: np.ndarray
+    speed_e: np.ndarray
+
+
 def _linkable(
-    aa: np.ndarray,
-    b: np.ndarray,
-    t_first: np.ndarray,
-    t_last: np.ndarray,
-    end_pos: np.ndarray,
-    start_pos: np.ndarray,
-    v_e: np.ndarray,
-    v_s: np.ndarray,
-    has_e: np.ndarray,
-    has_s: np.ndarray,
-    speed_e: np.ndarray,
-    speed_s: np.ndarray,
-    params: ParamSet,
+    aa: np.ndarray, b: np.ndarray, ends: _Ends, params: ParamSet
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The candidate pairs (a, b) that may link, and their costs."""
+    t_first, t_last, start_pos, end_pos, v_s, v_e, has_s, has_e, speed_s, speed_e = ends
     fp = float(params.frame_period)
     gap = float(params.link_max_gap)
     dt = t_first[b] - t_last[aa]
@@ -228,6 +235,7 @@ def link_fragments(
     start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
     speed_e = np.linalg.norm(v_e, axis=1)
     speed_s = np.linalg.norm(v_s, axis=1)
+    ends = _Ends(t_first, t_last, start_pos, end_pos, v_s, v_e, has_s, has_e, speed_s, speed_e)
     idx = np.nonzero(eligible)[0]
     if active is None:
         row_sets = [(idx, idx)]
@@ -262,21 +270,7 @@ def link_fragments(
             valid &= b != aa
             valid &= t_first[b] > t_first[aa]  # B must start after A started
             aa, b = aa[valid], b[valid]
-            found = _linkable(
-                aa,
-                b,
-                t_first,
-                t_last,
-                end_pos,
-                start_pos,
-                v_e,
-                v_s,
-                has_e,
-                has_s,
-                speed_e,
-                speed_s,
-                params,
-            )
+            found = _linkable(aa, b, ends, params)
             pairs_a.append(found[0])
             pairs_b.append(found[1])
             pairs_cost.append(found[2])

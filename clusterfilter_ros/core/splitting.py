@@ -14,9 +14,10 @@ would:
    (at most ``split_gate + link_max_speed dt``) of a prediction may continue that track,
    and the pairing of tracks and groups that minimises the distances relative to these
    reaches is taken (Hungarian assignment), so two objects side by side each keep their
-   own track. A track without a velocity yet (one sample) reaches
-   ``split_gate + min(link_max_speed dt, 2 link_gate)``. A track not continued for more
-   than ``link_max_gap`` ends; a group no track takes starts a new one;
+   own track. A track without a velocity (one group in its last ``link_fit_window``)
+   reaches ``split_gate + min(link_max_speed dt, 2 link_gate)`` around its newest group.
+   A track not continued for more than ``link_max_gap`` ends; a group no track takes
+   starts a new one;
 3. every track becomes a cluster of its own and is scored like any other.
 
 Only flying clusters are split (centroid above ``min_centroid_z``), and, when the static
@@ -126,9 +127,10 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
         return np.empty(0, dtype=np.int64)
     groups, group_sample = return_groups(xyz, t, params.frame_period, params.split_blob)
     n = np.bincount(groups).astype(np.float64)
-    order = np.lexsort((np.bincount(groups, weights=t) / n, group_sample))
+    g_t = np.bincount(groups, weights=t) / n
     # Groups in processing order: by frame sample, then time.
-    g_t = (np.bincount(groups, weights=t) / n)[order]
+    order = np.lexsort((g_t, group_sample))
+    g_t = g_t[order]
     g_p = np.stack([np.bincount(groups, weights=xyz[:, a]) for a in range(3)], axis=1)
     g_p = (g_p / n[:, None])[order]
     bounds = np.flatnonzero(np.diff(group_sample[order])) + 1
@@ -176,10 +178,8 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
 
 def merged_clusters(scores: ClusterScores, params: ParamSet) -> np.ndarray:
     """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
-    high), moving as a whole (motion coherence above ``coherence_floor``: what is left of
-    walls and trees after static suppression is not) and wider than ``max_local_extent``
-    in their local windows, with at least twice ``min_cluster_points`` and at most
-    ``max_cluster_points`` points."""
+    high) and wider than ``max_local_extent`` in their local windows, with at least twice
+    ``min_cluster_points`` and at most ``max_cluster_points`` points."""
     return np.nonzero(
         (scores.local_extent > params.max_local_extent)
         & (scores.centroid[:, 2] >= params.min_centroid_z)
