@@ -489,6 +489,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "false = keep it whole (it then fails the extent gate).",
     ),
     ParamSpec(
+        "split_min_extent",
+        "float",
+        2.5,
+        "Splitting merged clusters: a flying cluster wider than this (m, mean extent in "
+        "its shortest local windows) and below min_confidence is split too; one wider "
+        "than max_local_extent always is.",
+        minimum=0.1,
+        maximum=1000.0,
+    ),
+    ParamSpec(
         "split_blob",
         "float",
         1.0,

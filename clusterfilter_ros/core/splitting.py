@@ -2,8 +2,8 @@
 
 Birds flying around a drone a few metres away touch its returns in the clusterer's 2 m
 space-time voxels, and the drone and the birds become one cluster that is too wide
-(``max_local_extent``) to be a drone. Such a cluster is taken apart the way a tracker
-would:
+(``max_local_extent``) or too erratic to be a drone. Such a cluster is taken apart the
+way a tracker would:
 
 1. its returns are grouped into frame samples (:func:`~.linking.frame_sample_ids`), and
    within each sample into *return groups*: connected components of ``split_blob``
@@ -178,10 +178,17 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
 
 def merged_clusters(scores: ClusterScores, params: ParamSet) -> np.ndarray:
     """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
-    high) and wider than ``max_local_extent`` in their local windows, with at least twice
-    ``min_cluster_points`` and at most ``max_cluster_points`` points."""
+    high), with at least twice ``min_cluster_points`` and at most ``max_cluster_points``
+    points, and either wider than ``max_local_extent`` in their local windows (no drone
+    as a whole) or wider than ``split_min_extent`` and below ``min_confidence`` (birds
+    2-3 m from the drone make a cluster narrow enough to pass the extent gate, which
+    then fails on its smoothness)."""
+    wide = scores.local_extent > params.max_local_extent
+    wide |= (scores.local_extent > params.split_min_extent) & (
+        scores.confidence < params.min_confidence
+    )
     return np.nonzero(
-        (scores.local_extent > params.max_local_extent)
+        wide
         & (scores.centroid[:, 2] >= params.min_centroid_z)
         & (scores.n_points >= 2 * params.min_cluster_points)
         & (scores.n_points <= params.max_cluster_points)

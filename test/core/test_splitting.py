@@ -14,6 +14,7 @@ from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters
 from clusterfilter_ros.core.splitting import (
     kinematic_tracks,
+    merged_clusters,
     return_groups,
     split_and_score,
     split_merged,
@@ -153,3 +154,20 @@ def test_only_the_pieces_are_scored_again_and_match_a_full_rescoring():
     full = score(out, xyz, t, params, n_clusters=k)
     for f in dataclasses.fields(full):
         assert np.allclose(getattr(scores, f.name), getattr(full, f.name), equal_nan=True), f.name
+
+
+def test_narrower_clusters_are_split_only_when_they_fail_as_a_whole():
+    params = detector_params()
+    xyz, t, _ = _merged_scene()
+    labels = np.repeat(np.arange(4), int(np.ceil(t.size / 4)))[: t.size]
+    scores = score_clusters(labels, xyz, t, params, n_clusters=4)
+    # Cluster 0 wider than max_local_extent, 1 and 2 between split_min_extent and it
+    # (1 confident, 2 not), 3 narrower than split_min_extent and not confident.
+    mid = (params.split_min_extent + params.max_local_extent) / 2
+    scores = dataclasses.replace(
+        scores,
+        local_extent=np.array([params.max_local_extent + 1, mid, mid, 1.0]),
+        confidence=np.array([0.9, 0.9, 0.1, 0.1]),
+    )
+    assert merged_clusters(scores, params).tolist() == [0, 2]
+    assert merged_clusters(scores, params.copy(split_min_extent=100.0)).tolist() == [0]
