@@ -41,14 +41,15 @@ _BLOCK = 512
 _BLOCK_CELLS = 1 << 18
 
 
-def linking_reach(gap: np.ndarray, params: ParamSet) -> np.ndarray:
+def linking_reach(gap: np.ndarray, params: ParamSet, gate: float | None = None) -> np.ndarray:
     """Distance (m) a fragment may be from where the previous one was heading after
-    ``gap`` seconds: ``link_gate + link_max_accel * gap^2 / 2``, at most
-    ``link_gate + link_max_speed * gap``."""
+    ``gap`` seconds: ``gate + link_max_accel * gap^2 / 2``, at most
+    ``gate + link_max_speed * gap`` (``gate`` default ``link_gate``)."""
     gap = np.abs(np.asarray(gap, dtype=np.float64))
+    base = params.link_gate if gate is None else gate
     return np.minimum(
-        params.link_gate + 0.5 * params.link_max_accel * gap * gap,
-        params.link_gate + params.link_max_speed * gap,
+        base + 0.5 * params.link_max_accel * gap * gap,
+        base + params.link_max_speed * gap,
     )
 
 
@@ -240,9 +241,9 @@ def link_fragments(
     if active is None:
         row_sets = [(idx, idx)]
     else:
-        act = idx[np.asarray(active, dtype=bool)[idx]]
+        is_active = np.asarray(active, dtype=bool)[idx]
         # Active rows with every column, then the other rows with active columns only.
-        row_sets = [(act, idx), (idx[~np.asarray(active, dtype=bool)[idx]], act)]
+        row_sets = [(idx[is_active], idx), (idx[~is_active], idx[is_active])]
     pairs_a, pairs_b, pairs_cost = [], [], []
     for rows_idx, cols_idx in row_sets:
         if rows_idx.size == 0 or cols_idx.size == 0:

@@ -484,9 +484,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "split_merged",
         "bool",
         True,
-        "A flying cluster wider than max_local_extent (a drone and birds near it, joined "
-        "by the clusterer) is split into kinematic tracks, each scored on its own; "
-        "false = keep it whole (it then fails the extent gate).",
+        "A flying cluster too wide to be one object (a drone and birds near it, joined "
+        "by the clusterer: wider than max_local_extent, or than split_min_extent and "
+        "below min_confidence) is split into kinematic tracks, each scored on its own; "
+        "false = keep it whole.",
     ),
     ParamSpec(
         "split_min_extent",

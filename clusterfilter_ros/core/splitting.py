@@ -37,7 +37,7 @@ from scipy.optimize import linear_sum_assignment
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
-from clusterfilter_ros.core.linking import frame_sample_ids
+from clusterfilter_ros.core.linking import frame_sample_ids, linking_reach
 from clusterfilter_ros.core.params import ParamSet
 from clusterfilter_ros.core.scoring import ClusterScores, select_and_append, structure_contact
 
@@ -111,9 +111,7 @@ def _predictions(
     gate = params.split_gate
     reach = np.where(
         moving,
-        np.minimum(
-            gate + 0.5 * params.link_max_accel * gap * gap, gate + params.link_max_speed * gap
-        ),
+        linking_reach(gap, params, gate),
         gate + np.minimum(params.link_max_speed * gap, 2.0 * params.link_gate),
     )
     return centre, reach
