@@ -208,19 +208,31 @@ def low_confidence_factors(scores, c: int, params) -> str:
 
 @contextlib.contextmanager
 def _recording_scores(record):
-    """Make the streaming detector's scoring call ``record(labels, xyz, t, params, scores)``."""
-    original = streaming.score_clusters
+    """Make each streaming re-clustering call ``record(labels, xyz, t, params, scores)``
+    once, with the labels and scores it selects from: those of the first scoring call,
+    or, when merged clusters were split, the split's (its pieces are scored on their
+    own, and the hysteresis re-scores with other parameters; neither is recorded)."""
+    original_score = streaming.score_clusters
+    original_split = streaming.split_and_score
 
     def scored(labels, xyz, t, params, **kwargs):
-        scores = original(labels, xyz, t, params, **kwargs)
+        scores = original_score(labels, xyz, t, params, **kwargs)
         record(labels, xyz, t, params, scores)
         return scores
 
+    def split(labels, xyz, t, scores, params, *args, **kwargs):
+        out = original_split(labels, xyz, t, scores, params, *args, **kwargs)
+        if out[3].any():
+            record(out[0], xyz, t, params, out[2], replace=True)
+        return out
+
     streaming.score_clusters = scored
+    streaming.split_and_score = split
     try:
         yield
     finally:
-        streaming.score_clusters = original
+        streaming.score_clusters = original_score
+        streaming.split_and_score = original_split
 
 
 def stream_miss_reasons(sim, params) -> Counter:
@@ -238,7 +250,10 @@ def stream_miss_reasons(sim, params) -> Counter:
     detector = streaming.StreamingDetector(params)
     log: list[tuple[float, str]] = []
 
-    def record(labels, xyz, t, p, scores) -> None:
+    def record(labels, xyz, t, p, scores, replace: bool = False) -> None:
+        again = bool(log) and log[-1][0] == detector._now
+        if again and not replace:
+            return
         near = np.linalg.norm(xyz - true_position(t), axis=1) < 1.5
         lab = labels[near & (labels >= 0)]
         if not near.any():
@@ -254,7 +269,10 @@ def stream_miss_reasons(sim, params) -> Counter:
                 cause = "low confidence: " + low_confidence_factors(scores, c, p)
             else:
                 cause = "a confident drone cluster, another one tracked"
-        log.append((detector._now, cause))
+        if again:
+            log[-1] = (detector._now, cause)
+        else:
+            log.append((detector._now, cause))
 
     frames = sim.sequence.frames
     stamps, states, est_t, est_xyz = [], [], [], []
