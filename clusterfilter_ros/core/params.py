@@ -492,10 +492,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "split_min_extent",
         "float",
-        2.5,
+        2.0,
         "Splitting merged clusters: a flying cluster wider than this (m, mean extent in "
         "its shortest local windows) and below min_confidence is split too; one wider "
         "than max_local_extent always is.",
+        minimum=0.1,
+        maximum=1000.0,
+    ),
+    ParamSpec(
+        "stream_split_min_extent",
+        "float",
+        2.5,
+        "Streaming: split_min_extent for the local history (without the offline track "
+        "confirmation, a flock split into single birds can be reported).",
         minimum=0.1,
         maximum=1000.0,
     ),

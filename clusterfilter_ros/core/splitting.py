@@ -174,17 +174,20 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
     return track_of_group[groups]
 
 
-def merged_clusters(scores: ClusterScores, params: ParamSet) -> np.ndarray:
+def merged_clusters(
+    scores: ClusterScores, params: ParamSet, min_extent: float | None = None
+) -> np.ndarray:
     """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
     high), with at least twice ``min_cluster_points`` and at most ``max_cluster_points``
     points, and either wider than ``max_local_extent`` in their local windows (no drone
-    as a whole) or wider than ``split_min_extent`` and below ``min_confidence`` (birds
-    2-3 m from the drone make a cluster narrow enough to pass the extent gate, which
-    then fails on its smoothness)."""
+    as a whole) or wider than ``min_extent`` (default ``split_min_extent``; streaming
+    passes ``stream_split_min_extent``) and below ``min_confidence`` (birds 2-3 m from
+    the drone make a cluster narrow enough to pass the extent gate, which then fails on
+    its smoothness)."""
+    if min_extent is None:
+        min_extent = params.split_min_extent
     wide = scores.local_extent > params.max_local_extent
-    wide |= (scores.local_extent > params.split_min_extent) & (
-        scores.confidence < params.min_confidence
-    )
+    wide |= (scores.local_extent > min_extent) & (scores.confidence < params.min_confidence)
     return np.nonzero(
         wide
         & (scores.centroid[:, 2] >= params.min_centroid_z)
@@ -200,8 +203,10 @@ def split_merged(
     scores: ClusterScores,
     params: ParamSet,
     structure_keys: np.ndarray | None = None,
+    min_extent: float | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray]:
-    """Labels with each of :func:`merged_clusters` replaced by its kinematic tracks.
+    """Labels with each of :func:`merged_clusters` (``min_extent`` passed on) replaced by
+    its kinematic tracks.
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
@@ -210,7 +215,7 @@ def split_merged(
     cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
-    split = merged_clusters(scores, params)
+    split = merged_clusters(scores, params, min_extent)
     k = int(labels.max()) + 1 if labels.size else 0
     if split.size and structure_keys is not None and structure_keys.size:
         which = np.zeros(k, dtype=bool)
@@ -245,6 +250,7 @@ def split_and_score(
     params: ParamSet,
     score: Scorer,
     structure_keys: np.ndarray | None = None,
+    min_extent: float | None = None,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
     """:func:`split_merged`, then the scores of the new labels.
 
@@ -252,7 +258,7 @@ def split_and_score(
     window origin, ``t0``); the clusters left whole keep theirs. Returns (labels, K,
     scores, mask of the points that were in a split cluster).
     """
-    out, k, was_split = split_merged(labels, xyz, t, scores, params, structure_keys)
+    out, k, was_split = split_merged(labels, xyz, t, scores, params, structure_keys, min_extent)
     if not was_split.any():
         return out, k, scores, was_split
     # relabel_compact keeps the order: the clusters left whole come first, then pieces.

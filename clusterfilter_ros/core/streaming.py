@@ -283,7 +283,7 @@ class StreamingDetector:
                 scores = scorer(labels, xyz, t, p, n_clusters=k)
                 if p.split_merged:
                     labels, k, scores, _ = split_and_score(
-                        labels, xyz, t, scores, p, scorer, structure
+                        labels, xyz, t, scores, p, scorer, structure, p.stream_split_min_extent
                     )
                 score = functools.partial(scorer, labels, xyz, t, n_clusters=k)
                 chosen = select_clusters(scores, p)

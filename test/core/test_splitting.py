@@ -171,3 +171,26 @@ def test_narrower_clusters_are_split_only_when_they_fail_as_a_whole():
     )
     assert merged_clusters(scores, params).tolist() == [0, 2]
     assert merged_clusters(scores, params.copy(split_min_extent=100.0)).tolist() == [0]
+    # An explicit min_extent (streaming's stream_split_min_extent) replaces the parameter.
+    assert merged_clusters(scores, params, min_extent=100.0).tolist() == [0]
+    assert merged_clusters(scores, params, min_extent=0.5).tolist() == [0, 2, 3]
+
+
+def test_streaming_splits_with_its_own_min_extent(monkeypatch):
+    from clusterfilter_ros.core import streaming
+
+    seen = []
+    original = streaming.split_and_score
+
+    def spy(*args, **kwargs):
+        seen.append(args[7])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(streaming, "split_and_score", spy)
+    params = detector_params().copy(warmup=0.0, split_min_extent=1.5, stream_split_min_extent=3.5)
+    xyz, t, _ = _merged_scene(duration=2.0)
+    detector = streaming.StreamingDetector(params)
+    for stamp in np.unique(t):
+        at = t == stamp
+        detector.push(Frame(float(stamp), AVIA, xyz[at].astype(np.float32)))
+    assert seen and set(seen) == {3.5}
