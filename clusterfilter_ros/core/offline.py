@@ -8,8 +8,10 @@
    fragments of one sparse moving object into one cluster (:mod:`~.linking`).
 4. Score every cluster from its local windows; split a flying cluster too wide to be one
    object into kinematic tracks (:mod:`~.splitting`) and score those; gate; select the
-   drone cluster(s); grow each selected track at its ends by the noise points and small
-   clusters it was heading for, and fill it inside with those on its path.
+   drone cluster(s), a qualifying one that overlaps a selected one in time trimmed to
+   the rest (:func:`select_trimmed`); grow each selected track at its ends by the noise
+   points and small clusters it was heading for, and fill it inside with those on its
+   path.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
    (or given timestamps) inside the supported span.
 """
@@ -124,6 +126,51 @@ def global_clusters(
     return labels, k
 
 
+def select_trimmed(
+    labels: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    params: ParamSet,
+) -> tuple[np.ndarray, list[int], np.ndarray]:
+    """Selected clusters plus the qualifying candidates that :func:`select_clusters` left
+    out for overlapping a selected one in time, each trimmed to its points outside the
+    time spans already taken, if those still hold ``min_cluster_points`` points over at
+    least ``min_track_seconds`` (the confirmation a whole track needs).
+
+    Where a bird flies past the drone, the kinematic split (deviation 34) can end one
+    drone track and start the next in the middle of the other: the later, better track
+    is selected and the earlier one, seconds of drone before the swap, was dropped.
+    Returns (labels with the trimmed points set to -1, selected clusters best first,
+    mask of the trimmed points).
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    trimmed = np.zeros(labels.size, dtype=bool)
+    if not selected or params.scoring == "paper":
+        return labels, list(selected), trimmed
+    qualifies = scores.candidate & (scores.confidence >= params.min_confidence)
+    rank = scores.rank_score(params.scoring)
+    labels = labels.copy()
+    chosen = list(selected)
+    spans = [(float(scores.t_first[c]), float(scores.t_last[c])) for c in chosen]
+    for c in np.argsort(-rank, kind="stable"):
+        c = int(c)
+        if not qualifies[c] or c in chosen:
+            continue
+        member = np.nonzero(labels == c)[0]
+        covered = np.zeros(member.size, dtype=bool)
+        for first, last in spans:
+            covered |= (t[member] >= first) & (t[member] <= last)
+        rest = member[~covered]
+        if rest.size < params.min_cluster_points or np.ptp(t[rest]) < params.min_track_seconds:
+            continue
+        labels[member[covered]] = -1
+        trimmed[member[covered]] = True
+        chosen.append(c)
+        spans.append((float(t[rest].min()), float(t[rest].max())))
+    return labels, chosen, trimmed
+
+
 def extend_selected(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -180,6 +227,7 @@ def detect_offline(
             labels, xyz, t, scores, params, score, structure
         )
     selected = select_clusters(scores, params)
+    labels, selected, trimmed = select_trimmed(labels, t, scores, selected, params)
     rows = scores.rows()
     for row in rows:
         row["selected"] = float(int(row["cluster"]) in selected)
@@ -191,7 +239,9 @@ def detect_offline(
     if params.link_max_gap > 0:
         # The pieces of a split cluster were scored: none of them re-enters a track as
         # growth (a bird's piece beside the drone's would).
-        labels = extend_selected(labels, xyz, t, scores, selected, params, was_split)
+        # Nor do the points trimmed off a selected cluster.
+        exclude = trimmed if was_split is None else was_split | trimmed
+        labels = extend_selected(labels, xyz, t, scores, selected, params, exclude)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from clusterfilter_ros.core.frame import MID360, Frame
-from clusterfilter_ros.core.offline import detect_offline
+from clusterfilter_ros.core.offline import detect_offline, select_trimmed
 from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 
 
 def rmse(est, path) -> float:
@@ -73,3 +76,48 @@ def test_empty_and_degenerate_inputs():
     ]
     res = detect_offline(frames)
     assert len(res.estimates) == 0 and res.drone_points.shape == (0, 4)
+
+
+def _two_overlapping_tracks():
+    """Labels, times and scores of two straight tracks: cluster 0 over 0-10 s, cluster 1
+    over 8-18 s, 10 returns a second each."""
+    params = detector_params()
+    t0 = np.arange(0.0, 10.0, 0.1)
+    t1 = np.arange(8.0, 18.0, 0.1)
+    xyz = np.concatenate(
+        [
+            np.stack([t0, np.zeros_like(t0), np.full_like(t0, 20.0)], 1),
+            np.stack([t1, np.full_like(t1, 30.0), np.full_like(t1, 20.0)], 1),
+        ]
+    ).astype(np.float32)
+    t = np.concatenate([t0, t1])
+    labels = np.repeat([0, 1], [t0.size, t1.size])
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    # Cluster 1 ranks first; both qualify.
+    scores = dataclasses.replace(
+        scores, candidate=np.array([True, True]), confidence=np.array([0.7, 0.9])
+    )
+    return labels, t, scores, params
+
+
+def test_a_candidate_overlapping_the_selected_one_is_kept_outside_its_span():
+    labels, t, scores, params = _two_overlapping_tracks()
+    selected = select_clusters(scores, params)
+    assert selected == [1]  # the overlapping cluster 0 is left out
+    out, chosen, trimmed = select_trimmed(labels, t, scores, selected, params)
+    assert chosen == [1, 0]
+    # Cluster 0 keeps its returns before cluster 1 starts, and only those.
+    assert np.array_equal(trimmed, (labels == 0) & (t >= 8.0 - 1e-9))
+    assert t[out == 0].max() < 8.0 and np.all(out[trimmed] == -1)
+    assert np.array_equal(out[labels == 1], labels[labels == 1])
+
+
+def test_a_trimmed_rest_must_be_a_confirmed_track_and_paper_mode_keeps_one():
+    labels, t, scores, params = _two_overlapping_tracks()
+    # 8 s of rest is shorter than a 9 s confirmation: nothing is added.
+    short = params.copy(min_track_seconds=9.0)
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], short)
+    assert chosen == [1] and not trimmed.any() and np.array_equal(out, labels)
+    paper = params.copy(scoring="paper")
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], paper)
+    assert chosen == [1] and not trimmed.any()
