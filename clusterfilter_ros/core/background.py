@@ -72,16 +72,11 @@ def suppressed_keys(persistent: np.ndarray, params: ParamSet) -> np.ndarray:
     return _dilate(persistent, params.static_dilation)
 
 
-def static_mask_offline(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
-    """(N,) bool: points in voxels occupied in >= static_min_bins time bins of the sequence."""
-    return static_offline(xyz, t, params)[0]
-
-
 def static_offline(
     xyz: np.ndarray, t: np.ndarray, params: ParamSet
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(mask of the points in static voxels, sorted keys of those voxels) over a whole
-    sequence; see :func:`static_mask_offline`."""
+    """(mask of the points in voxels occupied in at least ``static_min_bins`` time bins of
+    the whole sequence, sorted keys of the voxels to suppress; see :func:`suppressed_keys`)."""
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
         return np.zeros(0, dtype=bool), np.empty(0, np.int64)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.background import BackgroundGrid, static_mask_offline
+from clusterfilter_ros.core.background import BackgroundGrid, static_offline
 from clusterfilter_ros.core.clustering import spacetime_cluster_points
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import motion_coherence
@@ -26,7 +26,7 @@ def wall_and_track(seconds: int = 10, seed: int = 0):
 
 def test_offline_persistence_masks_the_wall_not_the_drone():
     xyz, t, moving = wall_and_track()
-    static = static_mask_offline(xyz, t, detector_params())
+    static, _ = static_offline(xyz, t, detector_params())
     assert static[~moving].mean() > 0.99
     assert not static[moving].any()
 
