@@ -285,7 +285,6 @@ class StreamingDetector:
                     labels, k, scores, _ = split_and_score(
                         labels, xyz, t, scores, p, scorer, structure, p.stream_split_min_extent
                     )
-                score = functools.partial(scorer, labels, xyz, t, n_clusters=k)
                 chosen = select_clusters(scores, p)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.
@@ -306,8 +305,7 @@ class StreamingDetector:
                             # A hovering drone 10-20 m away leaves about as many frames in
                             # the history as hover_min_frames asks: once reported, fewer
                             # suffice.
-                            relaxed = score(params=p.copy(hover_min_frames=p.hover_keep_frames))
-                            self._keep_track(*where, relaxed, labels, xyz, t)
+                            self._keep_hovering(*where, labels, xyz, t, k, scorer)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
@@ -350,18 +348,61 @@ class StreamingDetector:
         """Hysteresis: continue the reported track with the cluster that holds its recent
         points, if that cluster passes the gates and has at least ``keep_confidence``;
         True if it did."""
+        c = self._track_cluster(predicted, gate, labels, xyz, t)
+        return c is not None and self._keep_cluster(c, scores, labels, xyz, t)
+
+    def _keep_hovering(
+        self,
+        predicted: np.ndarray,
+        gate: float,
+        labels: np.ndarray,
+        xyz: np.ndarray,
+        t: np.ndarray,
+        k: int,
+        scorer: Any,
+    ) -> bool:
+        """Hysteresis for a hovering track: the cluster :meth:`_keep_track` would take,
+        without its points farther than ``track_gate`` from ``predicted`` (a bird passing
+        a hovering drone leaves returns metres away in its cluster for the whole history,
+        and their residual would fail it), re-scored with ``hover_keep_frames`` frames
+        instead of ``hover_min_frames``; True if it continued the track."""
         p = self.params
-        recent = (t >= self._now - p.track_window) & (labels >= 0)
-        near = recent & (np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= gate**2)
-        if not near.any():
+        c = self._track_cluster(predicted, gate, labels, xyz, t)
+        if c is None:
             return False
-        c = int(np.bincount(labels[near]).argmax())
+        far = labels == c
+        far[far] = np.sum((xyz[far].astype(np.float64) - predicted) ** 2, axis=1) > p.track_gate**2
+        if far.any():
+            labels = labels.copy()
+            labels[far] = -1
+        relaxed = scorer(
+            labels, xyz, t, params=p.copy(hover_min_frames=p.hover_keep_frames), n_clusters=k
+        )
+        return self._keep_cluster(c, relaxed, labels, xyz, t)
+
+    def _keep_cluster(
+        self, c: int, scores: Any, labels: np.ndarray, xyz: np.ndarray, t: np.ndarray
+    ) -> bool:
+        """Continue the reported track with cluster ``c`` if it passes the gates with at
+        least ``keep_confidence``; True if it did."""
+        p = self.params
         if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
             # Reported at min_confidence: the track was confirmed, its evidence is weaker now.
             self._selected_conf = float(p.min_confidence)
             self._rebuild_track(labels == c, xyz, t)
             return True
         return False
+
+    def _track_cluster(
+        self, predicted: np.ndarray, gate: float, labels: np.ndarray, xyz: np.ndarray, t: np.ndarray
+    ) -> int | None:
+        """The cluster holding most of the points of the last ``track_window`` within
+        ``gate`` of ``predicted``, or None."""
+        recent = (t >= self._now - self.params.track_window) & (labels >= 0)
+        near = recent & (np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= gate**2)
+        if not near.any():
+            return None
+        return int(np.bincount(labels[near]).argmax())
 
     def _carry_over(self, old_track: list[_TrackSample]) -> None:
         """Re-append samples the previous track had gathered between re-clusterings (gated
