@@ -153,9 +153,10 @@ def select_trimmed(
     labels = labels.copy()
     chosen = list(selected)
     spans = [(float(scores.t_first[c]), float(scores.t_last[c])) for c in chosen]
-    for c in np.argsort(-rank, kind="stable"):
+    order = np.argsort(-rank, kind="stable")
+    for c in order[qualifies[order]]:
         c = int(c)
-        if not qualifies[c] or c in chosen:
+        if c in chosen:
             continue
         member = np.nonzero(labels == c)[0]
         covered = np.zeros(member.size, dtype=bool)
