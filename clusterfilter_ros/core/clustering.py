@@ -21,6 +21,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.grouping import group_bounds
 
 
 def voxel_clusters(
@@ -147,10 +148,7 @@ def merge_colocated_compact(
     counts = np.bincount(lab, minlength=k).astype(np.float64)
     centroid = np.stack([np.bincount(lab, weights=pts[:, a], minlength=k) for a in range(3)], 1)
     centroid /= counts[:, None]
-    lo = np.full((k, 3), np.inf)
-    hi = np.full((k, 3), -np.inf)
-    np.minimum.at(lo, lab, pts)
-    np.maximum.at(hi, lab, pts)
+    ((lo, hi),) = group_bounds(lab, k, pts)
     compact = np.nonzero((hi - lo).max(axis=1) <= max_extent)[0]
     if compact.size < 2:
         return labels, k

@@ -33,6 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from clusterfilter_ros.core.grouping import group_bounds
 from clusterfilter_ros.core.params import ParamSet
 
 #: Candidate pairs are formed in blocks of at most this many clusters and about this
@@ -94,10 +95,7 @@ def _frame_samples(
     n = n.astype(np.float64)
     ts = np.bincount(inv, weights=t) / n
     ps = np.stack([np.bincount(inv, weights=xyz[:, a]) for a in range(3)], axis=1) / n[:, None]
-    lo = np.full((n.size, 3), np.inf)
-    hi = np.full((n.size, 3), -np.inf)
-    np.minimum.at(lo, inv, xyz)
-    np.maximum.at(hi, inv, xyz)
+    ((lo, hi),) = group_bounds(inv, n.size, xyz)
     return cid, ts, ps, n, (hi - lo).max(axis=1)
 
 

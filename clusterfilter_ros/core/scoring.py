@@ -34,6 +34,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.grouping import group_bounds
 from clusterfilter_ros.core.params import ParamSet
 
 
@@ -173,10 +174,7 @@ def local_window_features(
     cw = labels * n_win + win
     cw_u, cw_inv, cw_points = np.unique(cw, return_inverse=True, return_counts=True)
     cw_inv = cw_inv.reshape(-1)
-    lo = np.full((cw_u.size, 3), np.inf)
-    hi = np.full((cw_u.size, 3), -np.inf)
-    np.minimum.at(lo, cw_inv, xyz)
-    np.maximum.at(hi, cw_inv, xyz)
+    ((lo, hi),) = group_bounds(cw_inv, cw_u.size, xyz)
     triple = (labels * n_fine + fid.reshape(-1)) * n_win + win
     triple_u = np.unique(triple)
     t_cw = (triple_u // (n_win * n_fine)) * n_win + triple_u % n_win
@@ -305,15 +303,8 @@ def score_clusters(
             res.centroid[:, axis] = np.bincount(
                 lab, weights=pts[:, axis], minlength=k
             ) / np.maximum(counts, 1.0)
-        lo = np.full((k, 3), np.inf)
-        hi = np.full((k, 3), -np.inf)
-        np.minimum.at(lo, lab, pts)
-        np.maximum.at(hi, lab, pts)
+        (lo, hi), (tf, tl) = group_bounds(lab, k, pts, tt)
         res.extent = np.where(counts > 0, (hi - lo).max(axis=1), 0.0)
-        tf = np.full(k, np.inf)
-        tl = np.full(k, -np.inf)
-        np.minimum.at(tf, lab, tt)
-        np.maximum.at(tl, lab, tt)
         res.t_first = np.where(counts > 0, tf, np.nan)
         res.t_last = np.where(counts > 0, tl, np.nan)
         origin = float(tt.min()) if t0 is None else float(t0)
