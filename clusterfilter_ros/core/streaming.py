@@ -361,11 +361,14 @@ class StreamingDetector:
         k: int,
         scorer: Any,
     ) -> bool:
-        """Hysteresis for a hovering track: the cluster :meth:`_keep_track` would take,
-        without its points farther than ``track_gate`` from ``predicted`` (a bird passing
-        a hovering drone leaves returns metres away in its cluster for the whole history,
-        and their residual would fail it), re-scored with ``hover_keep_frames`` frames
-        instead of ``hover_min_frames``; True if it continued the track."""
+        """Hysteresis for a hovering track, tried when :meth:`_keep_track` did not keep
+        it: the cluster that method looked at, without its points farther than
+        ``track_gate`` from ``predicted`` (a bird passing a hovering drone leaves returns
+        metres away in its cluster for the whole history, and their residual would fail
+        it), re-scored with ``hover_keep_frames`` frames instead of ``hover_min_frames``.
+        Only a cluster that still counts as hovering gains by this; a moving track's
+        cluster cut down to its last metres fails the gates. True if it continued the
+        track."""
         p = self.params
         c = self._track_cluster(predicted, gate, labels, xyz, t)
         if c is None:
