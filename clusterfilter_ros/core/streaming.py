@@ -443,6 +443,9 @@ class StreamingDetector:
                 self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
 
     def _rebuild_track(self, mask: np.ndarray, xyz: np.ndarray, t: np.ndarray) -> None:
+        """The track from the points in ``mask``: one sample per half frame period,
+        skipping a sample that no object could have reached from the sample kept before
+        it (deviation 39)."""
         pts, tt = xyz[mask], t[mask]
         if tt.size == 0:
             return
@@ -451,11 +454,21 @@ class StreamingDetector:
         order = np.argsort(bins, kind="stable")
         bins, pts, tt = bins[order], pts[order], tt[order]
         cuts = np.nonzero(np.diff(bins))[0] + 1
+        p = self.params
+        last = None
         for idx in np.split(np.arange(bins.size), cuts):
             group = pts[idx]
-            self._track.append(
-                _TrackSample(float(tt[idx].mean()), group.mean(axis=0, dtype=np.float64), group)
-            )
+            position = group.mean(axis=0, dtype=np.float64)
+            sample = _TrackSample(float(tt[idx].mean()), position, group)
+            if last is not None:
+                # A sample farther from the one kept before than track_gate plus
+                # link_max_speed allows is another object the linking joined to the
+                # cluster (a bird's returns at its end would become the track's newest).
+                reach = p.track_gate + p.link_max_speed * (sample.t - last.t)
+                if float(np.sum((sample.position - last.position) ** 2)) > reach * reach:
+                    continue
+            self._track.append(sample)
+            last = sample
 
     def _fit(self, stamp: float) -> tuple[np.ndarray, int] | None:
         """Position at ``stamp`` from the track's last track_window seconds of samples

@@ -135,6 +135,26 @@ def _tracked(times, positions, **values):
     return det
 
 
+def test_a_rebuilt_track_skips_samples_no_object_could_reach():
+    # A drone at 4 m/s, then in the cluster's last 0.1 s the returns of a bird 6 m away
+    # that the linking joined to it: the bird is not the track's newest sample.
+    t = np.arange(0.0, 2.0, 0.05)
+    drone = np.stack([-4.0 * t, np.full_like(t, -10.0), np.full_like(t, 22.0)], 1)
+    bird_t = np.array([2.0, 2.05, 2.1])
+    bird = drone[-1] + np.array([4.5, -2.5, -2.0]) + np.zeros((3, 3))
+    xyz = np.vstack([drone, bird]).astype(np.float32)
+    times = np.concatenate([t, bird_t])
+    det = StreamingDetector(detector_params())
+    det._rebuild_track(np.ones(times.size, bool), xyz, times)
+    assert len(det._track) == t.size
+    assert det._track[-1].t == pytest.approx(t[-1])
+    # A drone at 14 m/s (within link_max_speed) keeps every sample.
+    fast = np.stack([14.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], 1).astype(np.float32)
+    det = StreamingDetector(detector_params())
+    det._rebuild_track(np.ones(t.size, bool), fast, t)
+    assert len(det._track) == t.size
+
+
 def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     times = np.arange(0.0, 2.0, 0.2)
     hover = [(10.0 + 0.01 * t, 5.0, 20.0) for t in times]
