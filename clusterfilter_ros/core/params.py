@@ -493,9 +493,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "split_min_extent",
         "float",
         2.0,
-        "Splitting merged clusters: a flying cluster wider than this (m, mean extent in "
-        "its shortest local windows) and below min_confidence is split too; one wider "
-        "than max_local_extent always is.",
+        "Splitting merged clusters, offline (streaming: stream_split_min_extent): a flying "
+        "cluster wider than this (m, mean extent in its shortest local windows) and below "
+        "min_confidence is split too; one wider than max_local_extent always is.",
         minimum=0.1,
         maximum=1000.0,
     ),
