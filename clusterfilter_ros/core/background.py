@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.grouping import group_bounds
 from clusterfilter_ros.core.params import ParamSet
 
 _MAX_BINS = 64
@@ -55,10 +56,8 @@ def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray
     centres = (voxel.unpack(static_keys) + 0.5) * params.static_voxel
     comp = voxel_clusters(static_keys, np.ones(static_keys.size), 0.0)
     k = int(comp.max()) + 1
-    lo = np.full((k, 3), np.inf)
-    hi = np.full((k, 3), -np.inf)
-    np.minimum.at(lo, comp, centres - params.static_voxel / 2)
-    np.maximum.at(hi, comp, centres + params.static_voxel / 2)
+    half = params.static_voxel / 2
+    (lo, _), (_, hi) = group_bounds(comp, k, centres - half, centres + half)
     small = (hi - lo).max(axis=1) <= params.hover_max_extent + 1e-9
     return static_keys[small[comp]]
 

@@ -156,10 +156,7 @@ def merge_colocated_compact(
     uk, inv = np.unique(keys, return_inverse=True)
     group = voxel_clusters(uk, np.ones(uk.size), 0.0)[inv.reshape(-1)]
     n_groups = int(group.max()) + 1
-    g_lo = np.full((n_groups, 3), np.inf)
-    g_hi = np.full((n_groups, 3), -np.inf)
-    np.minimum.at(g_lo, group, lo[compact])
-    np.maximum.at(g_hi, group, hi[compact])
+    (g_lo, _), (_, g_hi) = group_bounds(group, n_groups, lo[compact], hi[compact])
     small = (g_hi - g_lo).max(axis=1) <= max_extent  # the union must stay compact too
     target = np.arange(k)
     # Every compact cluster of a small group takes the group's smallest label.

@@ -119,10 +119,7 @@ def _line_fits(
         axis=1,
     )
     n_samples = np.bincount(c, minlength=k)
-    t_lo = np.full(k, np.inf)
-    t_hi = np.full(k, -np.inf)
-    np.minimum.at(t_lo, c, tt)
-    np.maximum.at(t_hi, c, tt)
+    ((t_lo, t_hi),) = group_bounds(c, k, tt)
     has_v = (n_samples >= 2) & (t_hi - t_lo > 0) & (stt > 0)
     vel = np.where(has_v[:, None], stp / np.maximum(stt, 1e-12)[:, None], 0.0)
     return tm, pm, vel, has_v
@@ -223,10 +220,7 @@ def link_fragments(
     )
     if np.count_nonzero(eligible) < 2:
         return labels, k
-    t_first = np.full(k, np.inf)
-    t_last = np.full(k, -np.inf)
-    np.minimum.at(t_first, cid, ts)
-    np.maximum.at(t_last, cid, ts)
+    ((t_first, t_last),) = group_bounds(cid, k, ts)
     win = float(params.link_fit_window)
     tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, ts >= t_last[cid] - win, k)
     tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, ts <= t_first[cid] + win, k)
