@@ -294,18 +294,20 @@ class StreamingDetector:
                     self._carry_over(old_track)
                     self._catch_up()
                 elif p.keep_confidence < p.min_confidence:
+                    # Hysteresis: the cluster holding the reported track's recent
+                    # points continues it if it passes the gates with keep_confidence.
                     where = self._expected_position(previous)
-                    if where is not None:
-                        kept = self._keep_track(*where, scores, labels, xyz, t)
-                        if (
-                            not kept
-                            and p.hover_detection
-                            and p.hover_keep_frames < p.hover_min_frames
-                        ):
-                            # A hovering drone 10-20 m away leaves about as many frames in
-                            # the history as hover_min_frames asks: once reported, fewer
-                            # suffice.
-                            self._keep_hovering(*where, labels, xyz, t, k, scorer)
+                    c = None if where is None else self._track_cluster(*where, labels, xyz, t)
+                    if (
+                        c is not None
+                        and not self._keep_cluster(c, scores, labels, xyz, t)
+                        and p.hover_detection
+                        and p.hover_keep_frames < p.hover_min_frames
+                    ):
+                        # A hovering drone 10-20 m away leaves about as many frames in
+                        # the history as hover_min_frames asks: once reported, fewer
+                        # suffice.
+                        self._keep_hovering(c, where[0], labels, xyz, t, k, scorer)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
@@ -336,43 +338,25 @@ class StreamingDetector:
         assert pred is not None  # the track has a sample at ``last``
         return last, pred[0], pred[3]
 
-    def _keep_track(
-        self,
-        predicted: np.ndarray,
-        gate: float,
-        scores: Any,
-        labels: np.ndarray,
-        xyz: np.ndarray,
-        t: np.ndarray,
-    ) -> bool:
-        """Hysteresis: continue the reported track with the cluster that holds its recent
-        points, if that cluster passes the gates and has at least ``keep_confidence``;
-        True if it did."""
-        c = self._track_cluster(predicted, gate, labels, xyz, t)
-        return c is not None and self._keep_cluster(c, scores, labels, xyz, t)
-
     def _keep_hovering(
         self,
+        c: int,
         predicted: np.ndarray,
-        gate: float,
         labels: np.ndarray,
         xyz: np.ndarray,
         t: np.ndarray,
         k: int,
         scorer: Any,
     ) -> bool:
-        """Hysteresis for a hovering track, tried when :meth:`_keep_track` did not keep
-        it: the cluster that method looked at, without its points farther than
-        ``track_gate`` from ``predicted`` (a bird passing a hovering drone leaves returns
-        metres away in its cluster for the whole history, and their residual would fail
-        it), re-scored with ``hover_keep_frames`` frames instead of ``hover_min_frames``.
-        Only a cluster that still counts as hovering gains by this; a moving track's
-        cluster cut down to its last metres fails the gates. True if it continued the
-        track."""
+        """Hysteresis for a hovering track, tried when cluster ``c`` (the one holding the
+        track's recent points) did not keep it as scored: ``c`` without its points
+        farther than ``track_gate`` from ``predicted`` (a bird passing a hovering drone
+        leaves returns metres away in its cluster for the whole history, and their
+        residual would fail it), re-scored with ``hover_keep_frames`` frames instead of
+        ``hover_min_frames``. Only a cluster that still counts as hovering gains by this; a
+        moving track's cluster cut down to its last metres fails the gates. True if it
+        continued the track."""
         p = self.params
-        c = self._track_cluster(predicted, gate, labels, xyz, t)
-        if c is None:
-            return False
         far = labels == c
         far[far] = np.sum((xyz[far].astype(np.float64) - predicted) ** 2, axis=1) > p.track_gate**2
         if far.any():
