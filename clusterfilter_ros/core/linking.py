@@ -178,8 +178,9 @@ def _linkable(
 def chains_formed(before: np.ndarray, after: np.ndarray, k_after: int) -> np.ndarray:
     """(K_after,) bool: the clusters of ``after`` that joined several of ``before``."""
     keep = before >= 0
-    pairs = np.unique(after[keep] * (int(before.max()) + 1) + before[keep])
-    return np.bincount(pairs // (int(before.max()) + 1), minlength=k_after) > 1
+    width = int(before.max()) + 1
+    pairs = np.unique(after[keep] * width + before[keep])
+    return np.bincount(pairs // width, minlength=k_after) > 1
 
 
 def link_fragments(
