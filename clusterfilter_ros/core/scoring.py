@@ -40,7 +40,10 @@ from clusterfilter_ros.core.params import ParamSet
 
 @dataclass
 class ClusterScores:
-    """Features and scores of K global clusters (every attribute is a length-K array)."""
+    """Features and scores of K global clusters (every attribute is a length-K array).
+
+    ``residual``, ``excess_residual`` and ``acceleration`` are measured only for
+    candidates whose score is not already 0 without them; they are 0 elsewhere."""
 
     n_points: np.ndarray
     n_voxels: np.ndarray
@@ -368,10 +371,12 @@ def score_clusters(
             # Staying in place is what lowers R and raises IoU, so a hovering candidate
             # is scored by its compactness and support alone.
             res.normalized_score = np.where(hovering, 1.0, res.normalized_score)
-        # Smoothness and acceleration only for clusters that pass the gates: the others
-        # cannot be selected, and the walls and crowns among them hold most of the points.
+        # Smoothness and acceleration only for clusters that pass the gates and still have
+        # a score (both only scale it down): the others cannot be selected, and the walls,
+        # crowns and incoherent clutter among them hold most of the points. The rest keep
+        # residual and acceleration 0.
         res.candidate = _gates(res, counts, params)
-        gated = res.candidate[lab]
+        gated = (res.candidate & (res.normalized_score > 0))[lab]
         g_lab, g_pts, g_t = lab[gated], pts[gated], tt[gated]
         res.residual = multiscale_residual(
             g_lab, g_pts, g_t, k, float(params.residual_window), origin
