@@ -34,9 +34,10 @@ def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray
     if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
         return np.empty((0, 3), np.float32), np.empty(0, np.float64)
     keep = usable_mask(frame, params)
-    pts = xyz[keep]
+    rows = np.flatnonzero(keep)  # take() by index is several times faster than a mask
+    pts = xyz.take(rows, axis=0)
     if frame.point_time is not None:
-        offs = frame.point_time[keep]
+        offs = frame.point_time.take(rows)
         offs = np.where(np.isfinite(offs) & (np.abs(offs) < 1.0), offs, 0.0)
         t = frame.stamp + offs
     else:

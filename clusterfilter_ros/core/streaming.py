@@ -147,16 +147,16 @@ class StreamingDetector:
         xyz, t = frame_points(frame, self.params)
         self._now = max(self._now, stamp)
         if frame.sensor in self.params.denoise_sensors:
-            keep = self._denoise(frame.sensor, stamp, xyz)
-            xyz, t = xyz[keep], t[keep]
+            keep = np.flatnonzero(self._denoise(frame.sensor, stamp, xyz))
+            xyz, t = xyz.take(keep, axis=0), t.take(keep)
         static_keys = voxel.voxel_keys(xyz, self.params.static_voxel)
         uk, inverse = np.unique(static_keys, return_inverse=True)
         inverse = inverse.reshape(-1)
         self._pending.append(self._distinct_hits(uk, static_keys, t))
         if self.params.static_suppression and self._static.size and xyz.shape[0]:
             # Points in voxels already known static never reach the local history.
-            moving = (voxel.lookup(self._static, uk) < 0)[inverse]
-            xyz, t, static_keys = xyz[moving], t[moving], static_keys[moving]
+            moving = np.flatnonzero((voxel.lookup(self._static, uk) < 0)[inverse])
+            xyz, t, static_keys = xyz.take(moving, axis=0), t.take(moving), static_keys.take(moving)
         self._chunks.append(_Chunk(stamp, xyz, t, static_keys))
         self._chunk_points += xyz.shape[0]
         self._evict_chunks()

@@ -32,8 +32,16 @@ HALF_OFFSETS = np.array(
 
 def voxel_indices(xyz: np.ndarray, size: float) -> np.ndarray:
     """(N, 3) int64 voxel indices of points for voxels of edge ``size`` metres."""
-    scaled = np.floor(np.asarray(xyz, dtype=np.float64) / float(size))
-    return np.clip(scaled, -_LIMIT, _LIMIT).astype(np.int64)
+    return _floor_indices(xyz, size, _LIMIT)
+
+
+def _floor_indices(xyz: np.ndarray, size: float, limit: int) -> np.ndarray:
+    """floor(xyz / size) in float64, clipped to +-limit, as int64; one float64 buffer
+    (fresh temporaries of a frame's size cost page faults on every call)."""
+    scaled = np.divide(np.asarray(xyz), float(size), dtype=np.float64)
+    np.floor(scaled, out=scaled)
+    np.clip(scaled, -limit, limit, out=scaled)
+    return scaled.astype(np.int64)
 
 
 def pack(idx: np.ndarray) -> np.ndarray:
@@ -96,9 +104,7 @@ def spacetime_keys(xyz: np.ndarray, t: np.ndarray, size: float, time_bin: float)
     Time is taken relative to the earliest stamp, so any recording up to 2**17 bins
     long (36 h at 0.5 s) fits; spatial indices are clipped to +-2**14 voxels.
     """
-    idx = np.clip(
-        np.floor(np.asarray(xyz, dtype=np.float64) / float(size)), -_S_OFFSET + 2, _S_OFFSET - 2
-    ).astype(np.int64)
+    idx = _floor_indices(xyz, size, _S_OFFSET - 2)
     t = np.asarray(t, dtype=np.float64)
     rel = np.floor((t - (t.min() if t.size else 0.0)) / float(time_bin))
     it = np.clip(rel, 0, (1 << _T_BITS) - 2).astype(np.int64)
