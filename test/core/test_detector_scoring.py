@@ -41,6 +41,21 @@ def test_relative_density_and_iou_separate_static_from_moving():
     assert select_clusters(s, params) == [1]
 
 
+def test_smoothness_is_measured_only_where_a_score_is_left():
+    # With the extent gates opened, the static wall is a candidate, but without coherent
+    # motion its score is 0 before the residual and acceleration factors (which only
+    # scale it down), so they are not measured for it.
+    xyz, t, lab = wall_and_blob()
+    params = detector_params({"max_cluster_points": 10**7, "max_local_extent": 100.0})
+    s = score_clusters(lab, xyz, t, params, n_clusters=2)
+    assert s.candidate.tolist() == [True, True]
+    assert s.normalized_score[0] == 0.0 and s.confidence[0] == 0.0
+    assert s.residual[0] == 0.0 and s.acceleration[0] == 0.0
+    assert 0.05 < s.residual[1] < params.smooth_residual
+    assert 0.0 < s.acceleration[1] < params.smooth_accel
+    assert s.confidence[1] > 0.8
+
+
 def test_paper_score_is_the_formula():
     xyz, t, lab = wall_and_blob(frames=40)
     params = detector_params({"frames": [2.0], "iou_weight": 0.5})

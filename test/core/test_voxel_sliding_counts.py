@@ -1,4 +1,5 @@
-"""SlidingVoxelCounts (the streaming Avia denoise window) equals a recount from scratch."""
+"""Voxel primitives: indices of points, and SlidingVoxelCounts (the streaming Avia denoise
+window), which must equal a recount from scratch."""
 
 import numpy as np
 
@@ -54,3 +55,21 @@ def test_neighbourhood_at_least_equals_the_count_threshold():
     for n in (1, 3, 10, 50):
         assert np.array_equal(window.neighbourhood_at_least(queries, n), counts >= n)
     assert not voxel.SlidingVoxelCounts().neighbourhood_at_least(queries, 1).any()
+
+
+def test_voxel_indices_floor_in_float64_and_clip():
+    rng = np.random.default_rng(3)
+    xyz = rng.uniform(-50.0, 50.0, (2000, 3)).astype(np.float32)
+    xyz[:10] = np.float32(0.5) * rng.integers(-20, 20, (10, 3))  # exactly on voxel edges
+    for size in (0.2, 0.5, 1.5):
+        expected = np.floor(xyz.astype(np.float64) / size).astype(np.int64)
+        np.testing.assert_array_equal(voxel.voxel_indices(xyz, size), expected)
+        np.testing.assert_array_equal(voxel.voxel_indices(xyz.tolist(), size), expected)
+    far = np.array([[1e30, -1e30, 0.0]])
+    assert voxel.voxel_indices(far, 1.0).tolist() == [[voxel._LIMIT, -voxel._LIMIT, 0]]
+    assert voxel.voxel_indices(np.empty((0, 3), np.float32), 1.0).shape == (0, 3)
+    # Space-time keys of the same cells are equal, of neighbouring cells different.
+    keys = voxel.spacetime_keys(
+        np.array([[0.1, 0.1, 0.1], [0.4, 0.2, 0.3], [1.1, 0.0, 0.0]]), np.zeros(3), 1.0, 0.5
+    )
+    assert keys[0] == keys[1] != keys[2]
