@@ -665,6 +665,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "min_travel",
+        "float",
+        8.0,
+        "Normalized scoring: a cluster this large (m, its bounding box's largest side) "
+        "counts as moving however slowly it went (a drone drifting below min_speed; "
+        "its coherence still has to show one object moving); 0 switches this off.",
+        minimum=0.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
         "residual_window",
         "float",
         2.0,

@@ -347,6 +347,8 @@ def score_clusters(
         span = np.maximum(res.t_last - res.t_first, fp)
         res.apparent_speed = np.where(counts > 0, res.extent / span, 0.0)
         moving = np.clip(res.apparent_speed / float(params.min_speed), 0.0, 1.0)
+        if params.min_travel > 0:
+            moving = np.maximum(moving, np.clip(res.extent / float(params.min_travel), 0.0, 1.0))
         motion = coherent * moving
         hovering = np.zeros(k, dtype=bool)
         if params.hover_detection:

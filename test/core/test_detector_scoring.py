@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
@@ -54,6 +55,22 @@ def test_smoothness_is_measured_only_where_a_score_is_left():
     assert 0.05 < s.residual[1] < params.smooth_residual
     assert 0.0 < s.acceleration[1] < params.smooth_accel
     assert s.confidence[1] > 0.8
+
+
+def test_a_slow_drift_over_many_metres_counts_as_moving():
+    # A compact blob drifting at 0.4 m/s for 30 s (12 m): slower than min_speed, but it
+    # has travelled many times its size.
+    rng = np.random.default_rng(5)
+    t = np.repeat(np.arange(300) * 0.1, 3)
+    xyz = np.column_stack([-6.0 + 0.4 * t, np.zeros_like(t), np.full_like(t, 25.0)])
+    xyz += rng.normal(0.0, 0.1, xyz.shape)
+    lab = np.zeros(t.size, int)
+    slow = score_clusters(lab, xyz, t, detector_params({"min_travel": 0.0}), n_clusters=1)
+    drift = score_clusters(lab, xyz, t, detector_params({"min_travel": 8.0}), n_clusters=1)
+    assert slow.apparent_speed[0] < 0.5 and slow.coherence[0] > 0.7
+    # The speed factor (apparent speed / min_speed) is lifted to 1; nothing else changes.
+    ratio = drift.normalized_score[0] / slow.normalized_score[0]
+    assert ratio == pytest.approx(1.0 / slow.apparent_speed[0], rel=1e-6)
 
 
 def test_paper_score_is_the_formula():
