@@ -333,6 +333,15 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100000,
     ),
     ParamSpec(
+        "hover_min_seconds",
+        "float",
+        2.0,
+        "Time span (s) a compact cluster needs to count as a hovering drone: a dense "
+        "object close to the rig fills hover_min_frames within a second while passing.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "hover_keep_frames",
         "int",
         11,

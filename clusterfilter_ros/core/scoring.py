@@ -352,16 +352,20 @@ def score_clusters(
         motion = coherent * moving
         hovering = np.zeros(k, dtype=bool)
         if params.hover_detection:
-            # A compact object seen in many frames: a hovering drone (static structure
-            # has been suppressed, except compact isolated groups; see background.py).
+            # A compact object seen in many frames over some seconds: a hovering drone
+            # (static structure has been suppressed, except compact isolated groups; see
+            # background.py). A dense flock passing close to the rig fills the frames
+            # within a second, hence the time span too.
             # Extent between the 10th and 90th percentiles per axis: a few returns of a
             # bird passing by must not stretch a hovering drone's cluster past the limit.
             core_extent = np.max(
                 [np.subtract(*group_quantiles(lab, pts[:, a], k, (0.9, 0.1))) for a in range(3)],
                 axis=0,
             )
-            hovering = (core_extent <= params.hover_max_extent) & (
-                res.support_frames >= params.hover_min_frames
+            hovering = (
+                (core_extent <= params.hover_max_extent)
+                & (res.support_frames >= params.hover_min_frames)
+                & (span >= float(params.hover_min_seconds))
             )
             if structure_keys is not None and structure_keys.size and hovering.any():
                 contact = structure_contact(

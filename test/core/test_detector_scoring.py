@@ -73,6 +73,24 @@ def test_a_slow_drift_over_many_metres_counts_as_moving():
     assert ratio == pytest.approx(1.0 / slow.apparent_speed[0], rel=1e-6)
 
 
+def test_hovering_needs_a_time_span_as_well_as_frames():
+    # A compact object in place, 20 frames a second (both lidars): after 1.6 s it has the
+    # hover_min_frames (0.1 s bins), but only after hover_min_seconds does it count as
+    # hovering.
+    rng = np.random.default_rng(2)
+    params = detector_params()
+
+    def blob(seconds: float):
+        t = np.repeat(np.arange(int(seconds * 20)) * 0.05, 6)
+        xyz = np.array([5.0, 3.0, 20.0]) + rng.normal(0.0, 0.15, (t.size, 3))
+        return score_clusters(np.zeros(t.size, int), xyz, t, params, n_clusters=1)
+
+    brief, longer = blob(1.6), blob(3.0)
+    assert brief.support_frames[0] >= params.hover_min_frames
+    assert brief.confidence[0] == 0.0
+    assert longer.confidence[0] > params.min_confidence
+
+
 def test_paper_score_is_the_formula():
     xyz, t, lab = wall_and_blob(frames=40)
     params = detector_params({"frames": [2.0], "iou_weight": 0.5})
