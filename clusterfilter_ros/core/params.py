@@ -337,7 +337,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "float",
         2.0,
         "Time span (s) a compact cluster needs to count as a hovering drone: a dense "
-        "object close to the rig fills hover_min_frames within a second while passing.",
+        "object close to the rig fills hover_min_frames (0.1 s bins) in 1.5 s while passing.",
         minimum=0.0,
         maximum=60.0,
     ),

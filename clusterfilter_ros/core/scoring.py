@@ -355,7 +355,7 @@ def score_clusters(
             # A compact object seen in many frames over some seconds: a hovering drone
             # (static structure has been suppressed, except compact isolated groups; see
             # background.py). A dense flock passing close to the rig fills the frames
-            # within a second, hence the time span too.
+            # in 1.5 s, hence the time span too.
             # Extent between the 10th and 90th percentiles per axis: a few returns of a
             # bird passing by must not stretch a hovering drone's cluster past the limit.
             core_extent = np.max(
