@@ -256,6 +256,8 @@ def detect_offline(
                 confidence=np.full(int(np.count_nonzero(labels == c)), scores.confidence[c]),
                 context_gap=float(params.link_max_gap),
                 context_window=float(params.link_fit_window),
+                stray_distance=float(params.stray_distance),
+                stray_speed=float(params.link_max_speed),
             )
             for c in selected
         ],

@@ -824,6 +824,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=10.0,
     ),
     ParamSpec(
+        "stray_distance",
+        "float",
+        2.0,
+        "Offline trajectory: returns of the selected clusters farther than this (m) from "
+        "the fitted track are left out and the track fitted again (another object's "
+        "returns joined to the drone's); 0 switches this off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "min_points",
         "int",
         1,

@@ -132,6 +132,10 @@ class Trajectory:
         return (csum[hi] - csum[lo]).astype(np.int64)
 
 
+#: Stray-return refits of :func:`fit_trajectory` (each re-judges every point).
+STRAY_REFITS = 3
+
+
 def fit_trajectory(
     t: np.ndarray,
     xyz: np.ndarray,
@@ -142,6 +146,8 @@ def fit_trajectory(
     confidence: np.ndarray | None = None,
     context_gap: float = 0.0,
     context_window: float = 1.0,
+    stray_distance: float = 0.0,
+    stray_speed: float = 0.0,
 ) -> Trajectory | None:
     """Fit a :class:`Trajectory` to drone points (t (N,), xyz (N, 3)); None if no points.
 
@@ -151,6 +157,16 @@ def fit_trajectory(
     through its own samples and those of the neighbouring segments' nearest
     ``context_window`` seconds, for neighbours at most ``context_gap`` away (see the
     module docstring); its span stays its own.
+
+    ``stray_distance`` (m, 0 = off): points farther than this from the fitted track
+    (another object's returns the clusterer joined to the drone's) are left out and the
+    track fitted again, up to :data:`STRAY_REFITS` times, each time judging every point
+    against the latest fit, so a drone return that a stray pulled the first fit away from
+    comes back. Nothing is left out when more than half the points would be.
+    ``stray_speed`` (m/s, 0 = off, with ``stray_distance``): a fitted curve follows a
+    stray sample at a segment's end (nothing beyond it holds the curve back), so the
+    first and last samples of each segment are also dropped, one by one, while they lie
+    farther than ``stray_distance`` + ``stray_speed`` x dt from their neighbour.
     """
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
@@ -159,6 +175,34 @@ def fit_trajectory(
     if t.size == 0:
         return None
     conf_pts = np.ones(t.size) if confidence is None else np.asarray(confidence)[good]
+    reach = (stray_distance, stray_speed) if stray_distance > 0 and stray_speed > 0 else None
+    fit_args = (max_gap, max_extrapolation, bin_seconds, context_gap, context_window, reach)
+    traj = _fit(t, xyz, conf_pts, *fit_args)
+    if stray_distance <= 0:
+        return traj
+    kept = np.ones(t.size, dtype=bool)
+    for _ in range(STRAY_REFITS):
+        off = np.linalg.norm(traj(t) - xyz, axis=1)
+        keep = ~(off > stray_distance)  # NaN (no estimate there): kept
+        if np.array_equal(keep, kept) or keep.sum() * 2 < t.size:
+            break
+        kept = keep
+        traj = _fit(t[kept], xyz[kept], conf_pts[kept], *fit_args)
+    return traj
+
+
+def _fit(
+    t: np.ndarray,
+    xyz: np.ndarray,
+    conf_pts: np.ndarray,
+    max_gap: float,
+    max_extrapolation: float,
+    bin_seconds: float,
+    context_gap: float,
+    context_window: float,
+    reach: tuple[float, float] | None,
+) -> Trajectory:
+    """:func:`fit_trajectory` without the stray refits, on finite points."""
     order = np.argsort(t, kind="stable")
     t, xyz, conf_pts = t[order], xyz[order], conf_pts[order]
     ts, ps, ws = time_samples(t, xyz, bin_seconds)
@@ -166,6 +210,8 @@ def fit_trajectory(
     cs = cs[:, 0]
     breaks = np.nonzero(np.diff(ts) > max_gap)[0] + 1
     groups = np.split(np.arange(ts.size), breaks)
+    if reach is not None:
+        groups = [_trim_unreachable_ends(ts, ps, idx, *reach) for idx in groups]
     segments = []
     for g, idx in enumerate(groups):
         st, sp, sw, sc = ts[idx], ps[idx], ws[idx], cs[idx]
@@ -205,6 +251,24 @@ def fit_trajectory(
             mean = np.average(sp, axis=0, weights=sw)
             segments.append(_Segment(st[0], st[-1], "constant", mean, conf, st.size))
     return Trajectory(segments, max_extrapolation, ts, ws)
+
+
+def _trim_unreachable_ends(
+    ts: np.ndarray, ps: np.ndarray, idx: np.ndarray, base: float, speed: float
+) -> np.ndarray:
+    """``idx`` (a segment's sample indices) without its first and last samples, one by
+    one, while they lie farther than ``base + speed * dt`` from their neighbour."""
+
+    def far(a: int, b: int) -> bool:
+        gap = abs(ts[a] - ts[b])
+        return bool(np.linalg.norm(ps[a] - ps[b]) > base + speed * gap)
+
+    lo, hi = 0, idx.size - 1
+    while hi > lo and far(idx[hi], idx[hi - 1]):
+        hi -= 1
+    while hi > lo and far(idx[lo], idx[lo + 1]):
+        lo += 1
+    return idx[lo : hi + 1]
 
 
 def merge_trajectories(parts: list[Trajectory], max_extrapolation: float) -> Trajectory | None:

@@ -107,3 +107,48 @@ def test_weighted_line_recovers_a_line_and_handles_one_instant():
     assert np.allclose(slope, [2, 0, 0]) and np.isclose(tc, 1.0) and np.allclose(mean, [2, 1, 2])
     slope, mean, _ = weighted_line(np.zeros(2), xyz[:2], np.ones(2))
     assert np.allclose(slope, 0) and np.allclose(mean, [1, 1, 2])
+
+
+def _track_with_strays():
+    """A drone at 8 m/s (4 returns per 0.1 s frame for 6 s) and another object's returns
+    joined to it: two inside the track, 6-10 m off, and the last return, 12 m off."""
+    rng = np.random.default_rng(7)
+    t = np.repeat(np.arange(60) * 0.1, 4) + rng.uniform(0, 0.01, 240)
+    truth = lambda s: np.column_stack([8.0 * s - 20.0, 2.0 + 0.0 * s, 25.0 + 0.3 * s])  # noqa: E731
+    xyz = truth(t) + rng.normal(0.0, 0.15, (t.size, 3))
+    stray_t = np.array([2.02, 3.51, 6.3])
+    stray = truth(stray_t) + np.array([[0.0, 6.0, -3.0], [5.0, 8.0, 0.0], [-6.0, 10.0, 2.0]])
+    return np.concatenate([t, stray_t]), np.vstack([xyz, stray]), truth
+
+
+def test_stray_returns_are_left_out_of_the_track():
+    t, xyz, truth = _track_with_strays()
+    stamps = np.arange(0.0, 6.0, 0.05)
+    args = dict(max_gap=1.0, max_extrapolation=0.5, bin_seconds=0.05)
+    plain = fit_trajectory(t, xyz, **args)
+    robust = fit_trajectory(t, xyz, **args, stray_distance=2.0, stray_speed=15.0)
+    err_plain = np.linalg.norm(plain(stamps) - truth(stamps), axis=1)
+    err_robust = np.linalg.norm(robust(stamps) - truth(stamps), axis=1)
+    assert np.nanmax(err_plain) > 1.0  # the strays pull the plain fit off the track
+    assert np.all(np.isfinite(err_robust)) and err_robust.max() < 0.3
+    # The last return (12 m off, 0.3 s after the drone's last) ends no segment.
+    assert robust.segments[-1].t_end < 6.0
+
+
+def test_stray_refit_leaves_a_clean_track_alone_and_keeps_a_mixed_cloud():
+    rng = np.random.default_rng(8)
+    t = np.repeat(np.arange(50) * 0.1, 3)
+    xyz = np.column_stack([3.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])
+    xyz += rng.normal(0.0, 0.1, xyz.shape)
+    args = dict(max_gap=1.0, max_extrapolation=0.5)
+    stamps = np.arange(0.0, 4.9, 0.1)
+    a = fit_trajectory(t, xyz, **args)(stamps)
+    b = fit_trajectory(t, xyz, **args, stray_distance=2.0, stray_speed=15.0)(stamps)
+    np.testing.assert_array_equal(a, b)
+    # Two objects 10 m apart in equal shares: more than half would be "stray" for any
+    # fit between them, so nothing is left out.
+    two = xyz.copy()
+    two[::2, 1] += 10.0
+    c = fit_trajectory(t, two, **args)(stamps)
+    d = fit_trajectory(t, two, **args, stray_distance=2.0)(stamps)
+    np.testing.assert_array_equal(c, d)
