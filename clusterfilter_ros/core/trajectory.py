@@ -212,6 +212,10 @@ def _fit(
     groups = np.split(np.arange(ts.size), breaks)
     if reach is not None:
         groups = [_trim_unreachable_ends(ts, ps, idx, *reach) for idx in groups]
+        used = np.concatenate(groups)  # the support counts only the samples fitted
+        ts_used, ws_used = ts[used], ws[used]
+    else:
+        ts_used, ws_used = ts, ws
     segments = []
     for g, idx in enumerate(groups):
         st, sp, sw, sc = ts[idx], ps[idx], ws[idx], cs[idx]
@@ -250,7 +254,7 @@ def _fit(
         else:
             mean = np.average(sp, axis=0, weights=sw)
             segments.append(_Segment(st[0], st[-1], "constant", mean, conf, st.size))
-    return Trajectory(segments, max_extrapolation, ts, ws)
+    return Trajectory(segments, max_extrapolation, ts_used, ws_used)
 
 
 def _trim_unreachable_ends(
