@@ -172,6 +172,56 @@ def select_trimmed(
     return labels, chosen, trimmed
 
 
+#: Seconds at each end of a selected cluster averaged for its end positions.
+END_WINDOW = 0.25
+
+
+def reachable_pieces(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    selected: list[int],
+    params: ParamSet,
+    exempt: frozenset[int] = frozenset(),
+) -> list[int]:
+    """``selected`` (best first) without the clusters that cannot be pieces of one track
+    with the better ones: each cluster's first and last positions (means over
+    :data:`END_WINDOW` s) must be within ``link_gate`` + ``link_max_speed`` x gap of
+    the end of the nearest better piece before it and of the start of the nearest one
+    after it. A bird leg taken while the drone was out of view, just before the drone's
+    track starts 80 m higher, is not part of the drone's track.
+
+    ``exempt`` clusters (the trimmed ones of :func:`select_trimmed`) are kept and do not
+    serve as neighbours: they meet another piece where a bird swapped tracks with the
+    drone, and the returns at that meeting are the bird's as often as the drone's."""
+    kept: list[tuple[int, float, np.ndarray, float, np.ndarray]] = []
+    for c in selected:
+        if c in exempt:
+            continue
+        tc = t[labels == c]
+        if tc.size == 0:
+            continue
+        pc = xyz[labels == c]
+        first, last = float(tc.min()), float(tc.max())
+        p_first = pc[tc <= first + END_WINDOW].mean(axis=0)
+        p_last = pc[tc >= last - END_WINDOW].mean(axis=0)
+        ok = True
+        before = [k for k in kept if k[3] <= first]
+        after = [k for k in kept if k[1] >= last]
+        if before:
+            k = max(before, key=lambda k: k[3])
+            reach = params.link_gate + params.link_max_speed * (first - k[3])
+            ok &= bool(np.linalg.norm(p_first - k[4]) <= reach)
+        if after:
+            k = min(after, key=lambda k: k[1])
+            reach = params.link_gate + params.link_max_speed * (k[1] - last)
+            ok &= bool(np.linalg.norm(k[2] - p_last) <= reach)
+        if ok:
+            kept.append((c, first, p_first, last, p_last))
+    taken = {k[0] for k in kept} | set(exempt)
+    return [c for c in selected if c in taken]
+
+
 def extend_selected(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -227,8 +277,11 @@ def detect_offline(
         labels, k, scores, was_split = split_and_score(
             labels, xyz, t, scores, params, score, structure
         )
-    selected = select_clusters(scores, params)
-    labels, selected, trimmed = select_trimmed(labels, t, scores, selected, params)
+    whole = select_clusters(scores, params)
+    labels, selected, trimmed = select_trimmed(labels, t, scores, whole, params)
+    selected = reachable_pieces(
+        labels, xyz, t, selected, params, frozenset(selected) - frozenset(whole)
+    )
     rows = scores.rows()
     for row in rows:
         row["selected"] = float(int(row["cluster"]) in selected)
@@ -258,6 +311,8 @@ def detect_offline(
                 context_window=float(params.link_fit_window),
                 stray_distance=float(params.stray_distance),
                 stray_speed=float(params.link_max_speed),
+                stray_accel=float(params.link_max_accel),
+                stray_window=float(params.link_fit_window),
             )
             for c in selected
         ],

@@ -16,6 +16,7 @@ seconds at each end (linear continuation there); elsewhere the answer is NaN.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -148,6 +149,8 @@ def fit_trajectory(
     context_window: float = 1.0,
     stray_distance: float = 0.0,
     stray_speed: float = 0.0,
+    stray_accel: float = math.inf,
+    stray_window: float = 1.0,
 ) -> Trajectory | None:
     """Fit a :class:`Trajectory` to drone points (t (N,), xyz (N, 3)); None if no points.
 
@@ -163,10 +166,14 @@ def fit_trajectory(
     track fitted again, up to :data:`STRAY_REFITS` times, each time judging every point
     against the latest fit, so a drone return that a stray pulled the first fit away from
     comes back. Nothing is left out when more than half the points would be.
-    ``stray_speed`` (m/s, 0 = off, with ``stray_distance``): a fitted curve follows a
-    stray sample at a segment's end (nothing beyond it holds the curve back), so the
-    first and last samples of each segment are also dropped, one by one, while they lie
-    farther than ``stray_distance`` + ``stray_speed`` x dt from their neighbour.
+    ``stray_speed`` (m/s, 0 = off, with ``stray_distance``), ``stray_accel`` (m/s^2)
+    and ``stray_window`` (s): a fitted curve follows a stray sample at a segment's end
+    (nothing beyond it holds the curve back), so the first and last samples of each
+    segment are also dropped, one by one, while they lie farther than
+    ``stray_distance`` + ``stray_speed`` x dt from their neighbour, or farther than
+    ``stray_distance`` + ``stray_accel`` x dt^2 / 2 from where the neighbouring
+    ``stray_window`` seconds of samples were heading; and so is a segment of fewer than
+    five samples that neither neighbouring segment could have reached that way.
     """
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
@@ -175,7 +182,9 @@ def fit_trajectory(
     if t.size == 0:
         return None
     conf_pts = np.ones(t.size) if confidence is None else np.asarray(confidence)[good]
-    reach = (stray_distance, stray_speed) if stray_distance > 0 and stray_speed > 0 else None
+    reach = None
+    if stray_distance > 0 and stray_speed > 0:
+        reach = (stray_distance, stray_speed, stray_accel, stray_window)
     fit_args = (max_gap, max_extrapolation, bin_seconds, context_gap, context_window, reach)
     traj = _fit(t, xyz, conf_pts, *fit_args)
     if stray_distance <= 0:
@@ -200,7 +209,7 @@ def _fit(
     bin_seconds: float,
     context_gap: float,
     context_window: float,
-    reach: tuple[float, float] | None,
+    reach: tuple[float, float, float, float] | None,
 ) -> Trajectory:
     """:func:`fit_trajectory` without the stray refits, on finite points."""
     order = np.argsort(t, kind="stable")
@@ -211,7 +220,7 @@ def _fit(
     breaks = np.nonzero(np.diff(ts) > max_gap)[0] + 1
     groups = np.split(np.arange(ts.size), breaks)
     if reach is not None:
-        groups = [_trim_unreachable_ends(ts, ps, idx, *reach) for idx in groups]
+        groups = _reachable_groups(ts, ps, ws, groups, reach)
         used = np.concatenate(groups)  # the support counts only the samples fitted
         ts_used, ws_used = ts[used], ws[used]
     else:
@@ -257,22 +266,61 @@ def _fit(
     return Trajectory(segments, max_extrapolation, ts_used, ws_used)
 
 
-def _trim_unreachable_ends(
-    ts: np.ndarray, ps: np.ndarray, idx: np.ndarray, base: float, speed: float
-) -> np.ndarray:
-    """``idx`` (a segment's sample indices) without its first and last samples, one by
-    one, while they lie farther than ``base + speed * dt`` from their neighbour."""
+def _unreachable(
+    ts: np.ndarray,
+    ps: np.ndarray,
+    ws: np.ndarray,
+    i: int,
+    side: np.ndarray,
+    reach: tuple[float, float, float, float],
+) -> bool:
+    """Whether no object could have got to sample ``i`` from the samples ``side`` (on one
+    side of it, the nearest last): farther than ``base + speed * dt`` from the nearest,
+    or farther than ``base + accel * dt^2 / 2`` from where the ``window`` seconds of
+    them next to it were heading (a straight line through them)."""
+    base, speed, accel, window = reach
+    j = side[-1]
+    gap = abs(ts[i] - ts[j])
+    if np.linalg.norm(ps[i] - ps[j]) > base + speed * gap:
+        return True
+    near = side[np.abs(ts[side] - ts[j]) <= window]
+    if near.size < 2 or np.ptp(ts[near]) <= 0:
+        return False
+    velocity, mean, tc = weighted_line(ts[near], ps[near], ws[near])
+    heading = mean + (ts[i] - tc) * velocity
+    return bool(np.linalg.norm(ps[i] - heading) > base + 0.5 * accel * gap * gap)
 
-    def far(a: int, b: int) -> bool:
-        gap = abs(ts[a] - ts[b])
-        return bool(np.linalg.norm(ps[a] - ps[b]) > base + speed * gap)
 
-    lo, hi = 0, idx.size - 1
-    while hi > lo and far(idx[hi], idx[hi - 1]):
-        hi -= 1
-    while hi > lo and far(idx[lo], idx[lo + 1]):
-        lo += 1
-    return idx[lo : hi + 1]
+def _reachable_groups(
+    ts: np.ndarray,
+    ps: np.ndarray,
+    ws: np.ndarray,
+    groups: list[np.ndarray],
+    reach: tuple[float, float, float, float],
+) -> list[np.ndarray]:
+    """Segments (sample indices) with their unreachable end samples trimmed, one by one,
+    and without the short ones (fewer than five samples) that no neighbouring segment
+    could have reached: another object's returns after the drone's, say."""
+    trimmed = []
+    for idx in groups:
+        lo, hi = 0, idx.size - 1
+        while hi > lo and _unreachable(ts, ps, ws, idx[hi], idx[lo:hi], reach):
+            hi -= 1
+        while hi > lo and _unreachable(ts, ps, ws, idx[lo], idx[lo + 1 : hi + 1][::-1], reach):
+            lo += 1
+        trimmed.append(idx[lo : hi + 1])
+    kept = []
+    for g, idx in enumerate(trimmed):
+        if idx.size < 5 and len(trimmed) > 1:
+            verdicts = []
+            if g > 0:
+                verdicts.append(_unreachable(ts, ps, ws, idx[0], trimmed[g - 1], reach))
+            if g + 1 < len(trimmed):
+                verdicts.append(_unreachable(ts, ps, ws, idx[-1], trimmed[g + 1][::-1], reach))
+            if all(verdicts):
+                continue
+        kept.append(idx)
+    return kept or trimmed  # short pieces that all disagree: nothing to prefer
 
 
 def merge_trajectories(parts: list[Trajectory], max_extrapolation: float) -> Trajectory | None:

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 
 from clusterfilter_ros.core.frame import MID360, Frame
-from clusterfilter_ros.core.offline import detect_offline, select_trimmed
+from clusterfilter_ros.core.offline import detect_offline, reachable_pieces, select_trimmed
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 
@@ -121,3 +121,22 @@ def test_a_trimmed_rest_must_be_a_confirmed_track_and_paper_mode_keeps_one():
     paper = params.copy(scoring="paper")
     out, chosen, trimmed = select_trimmed(labels, t, scores, [1], paper)
     assert chosen == [1] and not trimmed.any()
+
+
+def test_pieces_no_drone_could_join_are_not_one_track():
+    params = detector_params()
+    t = np.concatenate([np.linspace(0.0, 5.0, 50), np.linspace(5.5, 8.0, 30)])
+    t = np.concatenate([t, np.linspace(10.0, 14.0, 40)])
+    xyz = np.zeros((t.size, 3))
+    xyz[:50] = np.column_stack([np.linspace(0, 20, 50), np.zeros(50), np.full(50, 20.0)])
+    # Piece 1 starts 0.5 s after piece 0 ends, 60 m higher: no drone gets there.
+    xyz[50:80] = np.column_stack([np.linspace(20, 30, 30), np.zeros(30), np.full(30, 80.0)])
+    # Piece 2 starts 5 s after piece 0 ends, 25 m on: reachable at link_max_speed.
+    xyz[80:] = np.column_stack([np.linspace(45, 60, 40), np.zeros(40), np.full(40, 20.0)])
+    labels = np.repeat([0, 1, 2], [50, 30, 40])
+    assert reachable_pieces(labels, xyz, t, [0, 1, 2], params) == [0, 2]
+    # The better piece decides: with piece 1 ranked first, piece 0 goes (it ends 0.5 s
+    # before piece 1 starts), and piece 2, 2 s after piece 1 and 60 m lower, goes too.
+    assert reachable_pieces(labels, xyz, t, [1, 0, 2], params) == [1]
+    # A trimmed piece (exempt) is kept whatever its ends.
+    assert reachable_pieces(labels, xyz, t, [0, 1, 2], params, frozenset({1})) == [0, 1, 2]

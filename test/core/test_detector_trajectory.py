@@ -152,3 +152,27 @@ def test_stray_refit_leaves_a_clean_track_alone_and_keeps_a_mixed_cloud():
     c = fit_trajectory(t, two, **args)(stamps)
     d = fit_trajectory(t, two, **args, stray_distance=2.0)(stamps)
     np.testing.assert_array_equal(c, d)
+
+
+def test_returns_off_the_track_heading_end_no_segment():
+    # The drone (8 m/s along x) ends at 6 s. Another object's returns follow: one 0.7 s
+    # later, 4 m from the drone's last position (within reach at link speed, but far
+    # from where the drone was heading), and three more after a 1.5 s gap near it.
+    rng = np.random.default_rng(9)
+    t = np.repeat(np.arange(61) * 0.1, 3)
+    xyz = np.column_stack([8.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])
+    xyz += rng.normal(0.0, 0.1, xyz.shape)
+    other_t = np.array([6.7, 8.2, 8.4, 8.6])
+    other = np.array([[45.0, 2.0, 19.0], [44.0, 3.0, 18.0], [43.8, 3.2, 17.8], [43.6, 3.4, 17.6]])
+    t, xyz = np.concatenate([t, other_t]), np.vstack([xyz, other])
+    args = dict(max_gap=1.0, max_extrapolation=0.5, stray_distance=2.0, stray_speed=15.0)
+    speed_only = fit_trajectory(t, xyz, **args)
+    heading = fit_trajectory(t, xyz, **args, stray_accel=4.0, stray_window=1.0)
+    later = np.array([6.7, 8.3, 8.6])
+    assert np.isfinite(speed_only(later)).all()
+    assert np.isnan(heading(later)).all()
+    inside = np.arange(0.0, 6.0, 0.1)
+    err = np.linalg.norm(
+        heading(inside) - np.column_stack([8 * inside, 0 * inside, 20 + 0 * inside]), axis=1
+    )
+    assert err.max() < 0.3
