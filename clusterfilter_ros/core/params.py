@@ -548,8 +548,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_cluster_points",
         "int",
+        20,
+        "A global cluster with fewer points is not a candidate (paper code: 100); offline "
+        "(streaming has stream_min_cluster_points). Smaller clusters can still join a "
+        "selected track as it grows.",
+        minimum=1,
+        maximum=10000000,
+    ),
+    ParamSpec(
+        "stream_min_cluster_points",
+        "int",
         15,
-        "A global cluster with fewer points is not a candidate (paper code: 100).",
+        "Streaming: min_cluster_points for the re-clusterings (a new track has only its "
+        "first seconds of returns).",
         minimum=1,
         maximum=10000000,
     ),
@@ -968,6 +979,7 @@ PAPER_PRESET: dict[str, Any] = {
     "min_samples": 10,
     "cluster_voxel": 1.0,
     "min_cluster_points": 100,
+    "stream_min_cluster_points": 100,
     "max_cluster_points": 10000,
     "min_centroid_z": 6.0,
     "min_volume": 0.3,

@@ -240,6 +240,8 @@ class StreamingDetector:
     def _recluster(self) -> None:
         start = time.perf_counter()
         p = self.params
+        # Clusters are scored with streaming's own smallest candidate size.
+        ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
         self._last_recluster = self._now
         if self._pending:
             keys = np.concatenate([k for k, _ in self._pending])
@@ -280,12 +282,12 @@ class StreamingDetector:
                     min_track_seconds=p.stream_min_track_seconds,
                     structure_keys=structure,
                 )
-                scores = scorer(labels, xyz, t, p, n_clusters=k)
+                scores = scorer(labels, xyz, t, ps, n_clusters=k)
                 if p.split_merged:
                     labels, k, scores, _ = split_and_score(
-                        labels, xyz, t, scores, p, scorer, structure, p.stream_split_min_extent
+                        labels, xyz, t, scores, ps, scorer, structure, p.stream_split_min_extent
                     )
-                chosen = select_clusters(scores, p)
+                chosen = select_clusters(scores, ps)
                 if chosen:
                     # The selected cluster that was seen last is the one being tracked.
                     best = max(chosen[:3], key=lambda c: scores.t_last[c])
@@ -307,7 +309,7 @@ class StreamingDetector:
                         # A hovering drone 10-20 m away leaves about as many frames in
                         # the history as hover_min_frames asks: once reported, fewer
                         # suffice.
-                        self._keep_hovering(c, where[0], labels, xyz, t, k, scorer)
+                        self._keep_hovering(c, where[0], labels, xyz, t, k, scorer, ps)
         ms = (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
@@ -347,6 +349,7 @@ class StreamingDetector:
         t: np.ndarray,
         k: int,
         scorer: Any,
+        scoring: ParamSet,
     ) -> bool:
         """Hysteresis for a hovering track, tried when cluster ``c`` (the one holding the
         track's recent points) did not keep it as scored: ``c`` without its points
@@ -354,8 +357,8 @@ class StreamingDetector:
         leaves returns metres away in its cluster for the whole history, and their
         residual would fail it), re-scored with ``hover_keep_frames`` frames instead of
         ``hover_min_frames``. Only a cluster that still counts as hovering gains by this; a
-        moving track's cluster cut down to its last metres fails the gates. True if it
-        continued the track."""
+        moving track's cluster cut down to its last metres fails the gates. ``scoring``:
+        the parameters the re-clustering scored with. True if it continued the track."""
         p = self.params
         far = labels == c
         far[far] = np.sum((xyz[far].astype(np.float64) - predicted) ** 2, axis=1) > p.track_gate**2
@@ -363,7 +366,11 @@ class StreamingDetector:
             labels = labels.copy()
             labels[far] = -1
         relaxed = scorer(
-            labels, xyz, t, params=p.copy(hover_min_frames=p.hover_keep_frames), n_clusters=k
+            labels,
+            xyz,
+            t,
+            params=scoring.copy(hover_min_frames=p.hover_keep_frames),
+            n_clusters=k,
         )
         return self._keep_cluster(c, relaxed, labels, xyz, t)
 

@@ -33,6 +33,18 @@ def test_tracks_the_moving_drone(scene, drone_path_fn):
     assert stats["frames_pushed"] == len(frames) and stats["frames_rejected"] == 0
 
 
+def test_streaming_scores_with_its_own_smallest_cluster(scene):
+    # min_cluster_points is the offline value; the re-clusterings use
+    # stream_min_cluster_points, so a huge offline value changes nothing here.
+    frames, _, _ = scene(duration=6.0, wall_points=400)
+    base = run_streaming(frames, detector_params())
+    offline_only = run_streaming(frames, detector_params({"min_cluster_points": 10**6}))
+    stream_too = run_streaming(frames, detector_params({"stream_min_cluster_points": 10**6}))
+    assert len(base) > 0
+    assert [e.stamp for e in offline_only] == [e.stamp for e in base]
+    assert stream_too == []
+
+
 def test_drone_free_stream_is_quiet(scene):
     frames, _, _ = scene(duration=8.0, drone=False, wall_points=400)
     assert run_streaming(frames) == []
