@@ -549,8 +549,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "min_cluster_points",
         "int",
         20,
-        "A global cluster with fewer points is not a candidate (paper code: 100); offline "
-        "(streaming has stream_min_cluster_points). Smaller clusters can still join a "
+        "Offline: a global cluster with fewer points is not a candidate (paper code: 100; "
+        "streaming has stream_min_cluster_points); smaller clusters can still join a "
         "selected track as it grows.",
         minimum=1,
         maximum=10000000,
