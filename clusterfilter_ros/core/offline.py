@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -176,6 +177,14 @@ def select_trimmed(
 END_WINDOW = 0.25
 
 
+class _PieceEnds(NamedTuple):
+    cluster: int
+    first: float
+    p_first: np.ndarray
+    last: float
+    p_last: np.ndarray
+
+
 def reachable_pieces(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -194,31 +203,36 @@ def reachable_pieces(
     ``exempt`` clusters (the trimmed ones of :func:`select_trimmed`) are kept and do not
     serve as neighbours: they meet another piece where a bird swapped tracks with the
     drone, and the returns at that meeting are the bird's as often as the drone's."""
-    kept: list[tuple[int, float, np.ndarray, float, np.ndarray]] = []
+    kept: list[_PieceEnds] = []
     for c in selected:
         if c in exempt:
             continue
-        tc = t[labels == c]
+        member = labels == c
+        tc, pc = t[member], xyz[member]
         if tc.size == 0:
             continue
-        pc = xyz[labels == c]
         first, last = float(tc.min()), float(tc.max())
-        p_first = pc[tc <= first + END_WINDOW].mean(axis=0)
-        p_last = pc[tc >= last - END_WINDOW].mean(axis=0)
+        ends = _PieceEnds(
+            c,
+            first,
+            pc[tc <= first + END_WINDOW].mean(axis=0),
+            last,
+            pc[tc >= last - END_WINDOW].mean(axis=0),
+        )
         ok = True
-        before = [k for k in kept if k[3] <= first]
-        after = [k for k in kept if k[1] >= last]
+        before = [k for k in kept if k.last <= first]
+        after = [k for k in kept if k.first >= last]
         if before:
-            k = max(before, key=lambda k: k[3])
-            reach = params.link_gate + params.link_max_speed * (first - k[3])
-            ok &= bool(np.linalg.norm(p_first - k[4]) <= reach)
+            k = max(before, key=lambda k: k.last)
+            reach = params.link_gate + params.link_max_speed * (first - k.last)
+            ok &= bool(np.linalg.norm(ends.p_first - k.p_last) <= reach)
         if after:
-            k = min(after, key=lambda k: k[1])
-            reach = params.link_gate + params.link_max_speed * (k[1] - last)
-            ok &= bool(np.linalg.norm(k[2] - p_last) <= reach)
+            k = min(after, key=lambda k: k.first)
+            reach = params.link_gate + params.link_max_speed * (k.first - last)
+            ok &= bool(np.linalg.norm(k.p_first - ends.p_last) <= reach)
         if ok:
-            kept.append((c, first, p_first, last, p_last))
-    taken = {k[0] for k in kept} | set(exempt)
+            kept.append(ends)
+    taken = {k.cluster for k in kept} | set(exempt)
     return [c for c in selected if c in taken]
 
 
