@@ -10,7 +10,8 @@ distinct time bins of ``static_bin`` seconds is static (walls, roofs, trees, pol
 moving drone occupies any one voxel for a bin or two. Points in static voxels (optionally
 dilated by ``static_dilation`` voxels) are removed before clustering.
 
-Offline, bins are counted over the whole sequence; streaming, over the last
+Offline, bins are counted over the whole sequence, and a group of static voxels each hit
+over a few seconds only is released (:func:`drifting_static_keys`); streaming, over the last
 ``global_window`` seconds with a 64-bit hit mask per voxel (:class:`BackgroundGrid`).
 """
 
@@ -62,6 +63,36 @@ def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray
     return static_keys[small[comp]]
 
 
+def drifting_static_keys(
+    static_keys: np.ndarray, first_bin: np.ndarray, last_bin: np.ndarray, params: ParamSet
+) -> np.ndarray:
+    """The static voxels a slowly moving object left behind (a drone drifting, or slowing
+    into a hover and out of it, overhead).
+
+    At 1.5 m voxels and 1 s bins, a drone moving at under about 0.5 m/s fills each voxel
+    it crosses for three or more bins and so counts as static; when the voxels it filled
+    span more than ``hover_max_extent`` the compact-group exception does not keep them.
+    Structure is hit over the whole recording, such an object for a few seconds per
+    voxel. Static voxels are grouped as in :func:`compact_static_keys`; the groups of at
+    least three voxels whose median hit span (last minus first bin, in seconds) is at
+    most ``static_drift_span`` are returned (sorted keys). ``first_bin`` and ``last_bin``
+    are per key, in ``static_bin`` units.
+    """
+    if static_keys.size < 3 or params.static_drift_span <= 0:
+        return static_keys[:0]
+    from clusterfilter_ros.core.clustering import voxel_clusters
+
+    comp = voxel_clusters(static_keys, np.ones(static_keys.size), 0.0)
+    k = int(comp.max()) + 1
+    n = np.bincount(comp, minlength=k)
+    span = (np.asarray(last_bin) - np.asarray(first_bin)) * params.static_bin
+    order = np.lexsort((span, comp))
+    starts = np.searchsorted(comp[order], np.arange(k))
+    median_span = span[order[starts + (n - 1) // 2]]  # the lower median
+    drifting = (n >= 3) & (median_span <= params.static_drift_span)
+    return static_keys[drifting[comp]]
+
+
 def suppressed_keys(persistent: np.ndarray, params: ParamSet) -> np.ndarray:
     """Sorted keys of the voxels to suppress, from the sorted keys of the persistent ones:
     without the small isolated groups (a hovering drone; with ``hover_detection``), then
@@ -75,7 +106,8 @@ def static_offline(
     xyz: np.ndarray, t: np.ndarray, params: ParamSet
 ) -> tuple[np.ndarray, np.ndarray]:
     """(mask of the points in voxels occupied in at least ``static_min_bins`` time bins of
-    the whole sequence, sorted keys of the voxels to suppress; see :func:`suppressed_keys`)."""
+    the whole sequence, sorted keys of the voxels to suppress): those voxels without the
+    groups :func:`drifting_static_keys` returns, then :func:`suppressed_keys`."""
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
         return np.zeros(0, dtype=bool), np.empty(0, np.int64)
@@ -85,8 +117,17 @@ def static_offline(
     kinv = kinv.reshape(-1)
     n_bins = int(bins.max()) + 1
     pairs = np.unique(kinv * n_bins + bins)
-    bins_per_voxel = np.bincount(pairs // n_bins, minlength=ukeys.size)
-    static_keys = suppressed_keys(ukeys[bins_per_voxel >= params.static_min_bins], params)
+    pair_voxel, pair_bin = np.divmod(pairs, n_bins)
+    bins_per_voxel = np.bincount(pair_voxel, minlength=ukeys.size)
+    persistent = bins_per_voxel >= params.static_min_bins
+    persistent_keys = ukeys[persistent]
+    if params.static_drift_span > 0 and persistent_keys.size >= 3:
+        # pairs are sorted by voxel then bin: a voxel's first and last pairs hold its extremes
+        first = np.searchsorted(pair_voxel, np.flatnonzero(persistent))
+        last = first + bins_per_voxel[persistent] - 1
+        drifting = drifting_static_keys(persistent_keys, pair_bin[first], pair_bin[last], params)
+        persistent_keys = np.setdiff1d(persistent_keys, drifting, assume_unique=True)
+    static_keys = suppressed_keys(persistent_keys, params)
     return voxel.lookup(static_keys, keys) >= 0, static_keys
 
 

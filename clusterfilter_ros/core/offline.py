@@ -45,7 +45,7 @@ from clusterfilter_ros.core.linking import (
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
-from clusterfilter_ros.core.splitting import split_and_score
+from clusterfilter_ros.core.splitting import score_pieces, split_and_score, split_still
 from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory, merge_trajectories
 
 
@@ -173,16 +173,39 @@ def select_trimmed(
     return labels, chosen, trimmed
 
 
-#: Seconds at each end of a selected cluster averaged for its end positions.
+#: Seconds at each end of a selected cluster averaged for its end positions...
 END_WINDOW = 0.25
+#: ...and the fewest returns averaged there (one stray return must not be an end).
+END_POINTS = 5
 
 
 class _PieceEnds(NamedTuple):
     cluster: int
-    first: float
-    p_first: np.ndarray
+    first: float  # first and last stamps of the piece
     last: float
+    t_first: float  # mean stamp and position of the returns averaged at each end
+    p_first: np.ndarray
+    t_last: float
     p_last: np.ndarray
+
+
+def _piece_ends(cluster: int, t: np.ndarray, xyz: np.ndarray) -> _PieceEnds:
+    """The piece's ends: at each, the returns within :data:`END_WINDOW` s of its first
+    (last) stamp, or its :data:`END_POINTS` earliest (latest) if that is more."""
+    order = np.argsort(t, kind="stable")
+    t, xyz = t[order], xyz[order]
+    n_first = max(int(np.searchsorted(t, t[0] + END_WINDOW, side="right")), END_POINTS)
+    n_last = max(t.size - int(np.searchsorted(t, t[-1] - END_WINDOW, side="left")), END_POINTS)
+    head, tail = slice(0, n_first), slice(max(t.size - n_last, 0), t.size)
+    return _PieceEnds(
+        cluster,
+        float(t[0]),
+        float(t[-1]),
+        float(t[head].mean()),
+        xyz[head].mean(axis=0),
+        float(t[tail].mean()),
+        xyz[tail].mean(axis=0),
+    )
 
 
 def reachable_pieces(
@@ -195,10 +218,12 @@ def reachable_pieces(
 ) -> list[int]:
     """``selected`` (best first) without the clusters that cannot be pieces of one track
     with the better ones: each cluster's first and last positions (means over
-    :data:`END_WINDOW` s) must be within ``link_gate`` + ``link_max_speed`` x gap of
-    the end of the nearest better piece before it and of the start of the nearest one
-    after it. A bird leg taken while the drone was out of view, just before the drone's
-    track starts 80 m higher, is not part of the drone's track.
+    :data:`END_WINDOW` s, at least :data:`END_POINTS` returns) must be within
+    ``link_gate`` + ``link_max_speed`` x gap of the end of the nearest better piece
+    before it and of the start of the nearest one after it, the gap measured between
+    the mean stamps of the returns averaged. A bird leg taken while the drone was out of
+    view, just before the drone's track starts 80 m higher, is not part of the drone's
+    track.
 
     ``exempt`` clusters (the trimmed ones of :func:`select_trimmed`) are kept and do not
     serve as neighbours: they meet another piece where a bird swapped tracks with the
@@ -208,27 +233,19 @@ def reachable_pieces(
         if c in exempt:
             continue
         member = labels == c
-        tc, pc = t[member], xyz[member]
-        if tc.size == 0:
+        if not member.any():
             continue
-        first, last = float(tc.min()), float(tc.max())
-        ends = _PieceEnds(
-            c,
-            first,
-            pc[tc <= first + END_WINDOW].mean(axis=0),
-            last,
-            pc[tc >= last - END_WINDOW].mean(axis=0),
-        )
+        ends = _piece_ends(c, t[member], xyz[member])
         ok = True
-        before = [k for k in kept if k.last <= first]
-        after = [k for k in kept if k.first >= last]
+        before = [k for k in kept if k.last <= ends.first]
+        after = [k for k in kept if k.first >= ends.last]
         if before:
             k = max(before, key=lambda k: k.last)
-            reach = params.link_gate + params.link_max_speed * (first - k.last)
+            reach = params.link_gate + params.link_max_speed * max(ends.t_first - k.t_last, 0.0)
             ok &= bool(np.linalg.norm(ends.p_first - k.p_last) <= reach)
         if after:
             k = min(after, key=lambda k: k.first)
-            reach = params.link_gate + params.link_max_speed * (k.first - last)
+            reach = params.link_gate + params.link_max_speed * max(k.t_first - ends.t_last, 0.0)
             ok &= bool(np.linalg.norm(k.p_first - ends.p_last) <= reach)
         if ok:
             kept.append(ends)
@@ -291,6 +308,11 @@ def detect_offline(
         labels, k, scores, was_split = split_and_score(
             labels, xyz, t, scores, params, score, structure
         )
+    if params.split_still:
+        cut_labels, k, cut = split_still(labels, xyz, t, scores, params)
+        scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
+        labels = cut_labels
+        was_split = cut if was_split is None else was_split | cut
     whole = select_clusters(scores, params)
     labels, selected, trimmed = select_trimmed(labels, t, scores, whole, params)
     selected = reachable_pieces(

@@ -310,11 +310,29 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1,
     ),
     ParamSpec(
+        "static_drift_span",
+        "float",
+        8.0,
+        "Offline: a group of >= 3 touching static voxels whose median voxel was hit over at "
+        "most this many seconds is kept: a drone drifting slowly or slowing into a hover, "
+        "not structure (0 = off).",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
         "hover_detection",
         "bool",
         True,
         "Keep small isolated groups of static voxels (at most hover_max_extent) and accept "
         "compact clusters seen in >= hover_min_frames frames without motion: hovering drones.",
+    ),
+    ParamSpec(
+        "split_still",
+        "bool",
+        True,
+        "Offline: cut a flying cluster below min_confidence that stayed in place for "
+        "hover_min_seconds (within hover_max_extent) and flew too into before / stay / "
+        "after, each scored alone (a drone that hovers, then flies off).",
     ),
     ParamSpec(
         "hover_max_extent",

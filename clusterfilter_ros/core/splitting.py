@@ -259,8 +259,25 @@ def split_and_score(
     scores, mask of the points that were in a split cluster).
     """
     out, k, was_split = split_merged(labels, xyz, t, scores, params, structure_keys, min_extent)
+    return out, k, score_pieces(labels, out, k, was_split, xyz, t, scores, params, score), was_split
+
+
+def score_pieces(
+    labels: np.ndarray,
+    out: np.ndarray,
+    k: int,
+    was_split: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    params: ParamSet,
+    score: Scorer,
+) -> ClusterScores:
+    """Scores of ``out`` (K compact labels): the clusters of ``labels`` left whole keep
+    theirs (they come first, in order), the pieces of the split ones (``was_split``
+    points) are scored alone."""
     if not was_split.any():
-        return out, k, scores, was_split
+        return scores
     # relabel_compact keeps the order: the clusters left whole come first, then pieces.
     kept = np.setdiff1d(np.arange(len(scores)), np.unique(labels[was_split]))
     pieces = score(
@@ -270,4 +287,73 @@ def split_and_score(
         params,
         n_clusters=k - kept.size,
     )
-    return out, k, select_and_append(scores, kept, pieces), was_split
+    return select_and_append(scores, kept, pieces)
+
+
+def still_run(t: np.ndarray, xyz: np.ndarray, params: ParamSet) -> tuple[float, float] | None:
+    """(first, last) stamp of the longest stretch of at least ``hover_min_seconds`` over
+    which one object's returns stayed in a box of ``hover_max_extent`` (half-second
+    centroids, no gap longer than ``link_max_gap``), or None."""
+    step = 0.5
+    b = np.floor((t - t.min()) / step).astype(np.int64)
+    ub, inv = np.unique(b, return_inverse=True)
+    inv = inv.reshape(-1)
+    n = np.bincount(inv).astype(np.float64)
+    cen = np.stack([np.bincount(inv, xyz[:, a]) / n for a in range(3)], axis=1)
+    lo_t = np.full(ub.size, np.inf)
+    hi_t = np.full(ub.size, -np.inf)
+    np.minimum.at(lo_t, inv, t)
+    np.maximum.at(hi_t, inv, t)
+    best, best_len = None, float(params.hover_min_seconds)
+    for i in range(ub.size):
+        box = np.maximum.accumulate(cen[i:], axis=0) - np.minimum.accumulate(cen[i:], axis=0)
+        ok = (box.max(axis=1) <= params.hover_max_extent) & np.r_[
+            True, np.diff(ub[i:]) * step <= params.link_max_gap
+        ]
+        j = i + (int(np.argmin(ok)) if not ok.all() else ok.size) - 1
+        length = hi_t[j] - lo_t[i]
+        if length >= best_len:
+            best, best_len = (float(lo_t[i]), float(hi_t[j])), length
+    return best
+
+
+def split_still(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, scores: ClusterScores, params: ParamSet
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """Labels with each flying candidate below ``min_confidence`` that is wider than
+    ``hover_max_extent`` yet stayed in place for ``hover_min_seconds`` (:func:`still_run`)
+    cut in time into the part before, the stay, and the part after.
+
+    A drone that hovers, then flies off is one cluster: the stay lowers its relative
+    density and raises its IoU, the flight makes it too wide to count as hovering, and
+    the whole scores below both. Returns (compact labels, K, mask of the points that
+    were in a cut cluster), as :func:`split_merged`.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    k = int(labels.max()) + 1 if labels.size else 0
+    which = np.flatnonzero(
+        scores.candidate
+        & (scores.confidence < params.min_confidence)
+        & (scores.extent > params.hover_max_extent)
+        & (scores.t_last - scores.t_first >= 2 * params.hover_min_seconds)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+    )
+    out = labels.copy()
+    next_label = k
+    cut = []
+    for c in which:
+        member = np.flatnonzero(labels == c)
+        run = still_run(t[member], xyz[member].astype(np.float64), params)
+        if run is None:
+            continue
+        part = np.searchsorted(np.asarray(run), t[member], side="right")  # 0, 1 or 2
+        part[t[member] == run[1]] = 1  # the stay includes both its ends
+        if np.unique(part).size < 2:
+            continue
+        out[member] = next_label + part
+        next_label += 3
+        cut.append(c)
+    if not cut:
+        return labels, k, np.zeros(labels.size, dtype=bool)
+    labels_out, k_out = relabel_compact(out)
+    return labels_out, k_out, np.isin(labels, cut)

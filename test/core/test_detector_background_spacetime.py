@@ -137,3 +137,48 @@ def test_hovering_object_detected_offline_only_with_hover_detection():
     assert np.allclose(np.median(found.estimates.xyz, axis=0), [5, 5, 18], atol=0.3)
     missed = detect_offline(frames, detector_params({"hover_detection": False}))
     assert len(missed.estimates) == 0
+
+
+def _wall_and_slow_drone(seconds: int = 20, seed: int = 1):
+    """A wall hit every frame and a drone drifting at 0.3 m/s, 2 returns per frame."""
+    rng = np.random.default_rng(seed)
+    xyz, t, drone = [], [], []
+    for i in range(seconds * 10):
+        stamp = i * 0.1
+        wall = np.column_stack([np.full(40, 30.0), rng.uniform(-3, 3, 40), rng.uniform(5, 8, 40)])
+        body = np.array([[-3.0 + 0.03 * i, 4.0, 25.0]]) + rng.normal(0, 0.1, (2, 3))
+        xyz += [wall, body]
+        t += [np.full(40, stamp), np.full(2, stamp)]
+        drone += [np.zeros(40, bool), np.ones(2, bool)]
+    return np.vstack(xyz), np.concatenate(t), np.concatenate(drone)
+
+
+def test_a_slowly_drifting_drone_is_not_static_structure():
+    xyz, t, drone = _wall_and_slow_drone()
+    params = detector_params()
+    # Each 1.5 m voxel of its 6 m path holds the drone for ~5 s: persistent, and too
+    # long a group for the compact-group exception.
+    static, _ = static_offline(xyz, t, params.copy(static_drift_span=0.0))
+    assert static[drone].mean() > 0.8
+    static, keys = static_offline(xyz, t, params)
+    assert not static[drone].any()
+    assert static[~drone].mean() > 0.99
+    assert keys.size > 0
+
+
+def test_drifting_static_keys_needs_short_spans():
+    from clusterfilter_ros.core.background import drifting_static_keys
+
+    params = detector_params()
+    keys = voxel.voxel_keys(np.array([[x, 0.0, 20.0] for x in (0.0, 1.5, 3.0, 4.5)]), 1.5)
+    order = np.argsort(keys)
+    keys = keys[order]
+    first = np.array([0, 4, 8, 12])[order]
+    # Hit 3-5 s each, one after the other: a path.
+    kept = drifting_static_keys(keys, first, first + 4, params)
+    assert set(kept.tolist()) == set(keys.tolist())
+    # Hit over the whole 20 s recording each: structure.
+    whole = np.zeros(4, np.int64)
+    assert drifting_static_keys(keys, whole, whole + 19, params).size == 0
+    # Fewer than three voxels: left to the compact-group exception.
+    assert drifting_static_keys(keys[:2], first[:2], first[:2] + 4, params).size == 0

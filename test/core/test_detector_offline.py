@@ -140,3 +140,20 @@ def test_pieces_no_drone_could_join_are_not_one_track():
     assert reachable_pieces(labels, xyz, t, [1, 0, 2], params) == [1]
     # A trimmed piece (exempt) is kept whatever its ends.
     assert reachable_pieces(labels, xyz, t, [0, 1, 2], params, frozenset({1})) == [0, 1, 2]
+
+
+def test_one_stray_return_at_a_piece_end_does_not_make_it_unreachable():
+    params = detector_params()
+    # A drone at 6 m/s: piece 0 for 3.5 s (10 Hz, two returns per frame), piece 1 from
+    # 4.1 s.
+    t0 = np.repeat(np.arange(0.0, 3.5, 0.1), 2)
+    t1 = np.repeat(np.arange(4.1, 8.0, 0.1), 2)
+    path = lambda t: np.column_stack([6.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])  # noqa: E731
+    # Piece 0's last return, at 3.9 s, is a stray 6 m off, alone in its last 0.25 s:
+    # taken for its end, piece 1 would start 6 m from it 0.2 s later.
+    t_stray = np.array([3.9])
+    stray = path(t_stray) + [0.0, 0.0, 6.0]
+    t = np.concatenate([t0, t_stray, t1])
+    xyz = np.vstack([path(t0), stray, path(t1)])
+    labels = np.repeat([0, 1], [t0.size + 1, t1.size])
+    assert reachable_pieces(labels, xyz, t, [1, 0], params) == [1, 0]

@@ -18,6 +18,8 @@ from clusterfilter_ros.core.splitting import (
     return_groups,
     split_and_score,
     split_merged,
+    split_still,
+    still_run,
 )
 
 
@@ -194,3 +196,67 @@ def test_streaming_splits_with_its_own_min_extent(monkeypatch):
         at = t == stamp
         detector.push(Frame(float(stamp), AVIA, xyz[at].astype(np.float32)))
     assert seen and set(seen) == {3.5}
+
+
+def _hover_then_fly(t: np.ndarray, hover_s: float = 5.0) -> np.ndarray:
+    """Hovering 40 m up for ``hover_s`` s, then away at 4 m/s, climbing down 1 m/s."""
+    gone = np.clip(t - hover_s, 0.0, None)
+    return np.column_stack([4.0 * gone, np.zeros_like(t), 40.0 - gone])
+
+
+def test_still_run_finds_the_stay_and_nothing_in_a_steady_flight():
+    rng = np.random.default_rng(0)
+    t = np.repeat(np.arange(0.0, 12.0, 0.1), 3)
+    xyz = _hover_then_fly(t) + rng.normal(0, 0.1, (t.size, 3))
+    params = detector_params()
+    run = still_run(t, xyz, params)
+    assert run is not None
+    assert run[0] == 0.0 and 5.0 <= run[1] <= 6.0  # the stay, and the slow first metres
+    flight = np.column_stack([5.0 * t, np.zeros_like(t), np.full_like(t, 30.0)])
+    assert still_run(t, flight, params) is None
+
+
+def _hover_then_fly_frames(hover_returns: int, seed: int = 0) -> list[Frame]:
+    """A wall and a drone: ``hover_returns`` returns per frame while it hovers 5 s
+    (on the Avia's dense centre), two while it flies off for 10 s."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for i in range(150):
+        stamp = i * 0.1
+        wall = np.column_stack([np.full(40, 30.0), rng.uniform(-3, 3, 40), rng.uniform(5, 8, 40)])
+        n = hover_returns if stamp < 5.0 else 2
+        body = _hover_then_fly(np.full(n, stamp)) + rng.normal(0, 0.12, (n, 3))
+        frames.append(Frame(stamp, AVIA, np.vstack([wall, body]).astype(np.float32)))
+    return frames
+
+
+def test_a_drone_that_hovers_then_flies_off_is_cut_into_stay_and_flight():
+    frames = _hover_then_fly_frames(hover_returns=15)
+    # As one cluster the dense stay drags the flight's density score below min_confidence.
+    whole = detect_offline(frames, detector_params({"split_still": False}))
+    assert len(whole.estimates) == 0
+    drone = [c for c in whole.clusters if c["n_points"] > 100 and c["cz"] > 20]
+    assert len(drone) == 1 and drone[0]["confidence"] < detector_params().min_confidence
+    cut = detect_offline(frames)
+    assert len(cut.estimates) == 150
+    truth = _hover_then_fly(cut.estimates.stamps)
+    assert np.sqrt(np.mean(np.sum((cut.estimates.xyz - truth) ** 2, axis=1))) < 0.5
+    # A drone that hovers with fewer returns scores well enough whole, and is not cut.
+    sparse = _hover_then_fly_frames(hover_returns=4)
+    assert len(detect_offline(sparse, detector_params({"split_still": False})).estimates) == 150
+
+
+def test_split_still_leaves_confident_or_steady_clusters_alone():
+    params = detector_params()
+    rng = np.random.default_rng(1)
+    t = np.repeat(np.arange(0.0, 12.0, 0.1), 3)
+    xyz = _hover_then_fly(t) + rng.normal(0, 0.1, (t.size, 3))
+    labels = np.zeros(t.size, dtype=np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    low = dataclasses.replace(scores, confidence=np.array([0.3]))
+    out, k, cut = split_still(labels, xyz, t, low, params)
+    assert k == 2 and cut.all()  # the stay, and the flight after it
+    assert set(np.unique(out[t < 5.0])) == {0} and set(np.unique(out[t > 6.5])) == {1}
+    high = dataclasses.replace(scores, confidence=np.array([0.9]))
+    out, k, cut = split_still(labels, xyz, t, high, params)
+    assert k == 1 and not cut.any() and np.array_equal(out, labels)
