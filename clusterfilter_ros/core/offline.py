@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -125,6 +126,52 @@ def global_clusters(
                 break
             active = chains_formed(before, labels, k)
     return labels, k
+
+
+def cluster_trajectory(
+    t: np.ndarray, xyz: np.ndarray, confidence: float, params: ParamSet
+) -> Trajectory | None:
+    """The trajectory of one cluster's returns (see :func:`~.trajectory.fit_trajectory`)."""
+    return fit_trajectory(
+        t,
+        xyz,
+        max_gap=params.max_gap,
+        max_extrapolation=params.max_extrapolation,
+        bin_seconds=params.frame_period / 2,
+        confidence=np.full(t.size, confidence),
+        context_gap=float(params.link_max_gap),
+        context_window=float(params.link_fit_window),
+        stray_distance=float(params.stray_distance),
+        stray_speed=float(params.link_max_speed),
+        stray_accel=float(params.link_max_accel),
+        stray_window=float(params.link_fit_window),
+    )
+
+
+def tracked_spans(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, scores: ClusterScores, params: ParamSet
+) -> ClusterScores:
+    """``scores`` with the time span of each qualifying candidate (gates passed,
+    ``min_confidence``) replaced by that of its trajectory, which leaves out the returns
+    no object on the track could have made (``stray_distance``; deviations 42, 44). A
+    drone's track that picked up a few returns of something else after the drone left
+    it seemed to last seconds longer, and the next piece of the drone's track, which had
+    started meanwhile, overlapped it and was never selected. These spans decide only
+    which pieces overlap, in :func:`~.scoring.select_clusters` and
+    :func:`select_trimmed`."""
+    qualifies = np.flatnonzero(scores.candidate & (scores.confidence >= params.min_confidence))
+    if qualifies.size == 0 or params.scoring == "paper":
+        return scores
+    first, last = scores.t_first.copy(), scores.t_last.copy()
+    # Only spans that overlap another qualifying one matter.
+    lo, hi = first[qualifies], last[qualifies]
+    overlaps = (lo[:, None] <= hi[None, :]) & (lo[None, :] <= hi[:, None])
+    for c in qualifies[overlaps.sum(axis=1) > 1]:
+        member = labels == c
+        traj = cluster_trajectory(t[member], xyz[member], float(scores.confidence[c]), params)
+        if traj is not None and traj.segments:
+            first[c], last[c] = traj.span
+    return dataclasses.replace(scores, t_first=first, t_last=last)
 
 
 def select_trimmed(
@@ -313,8 +360,9 @@ def detect_offline(
         scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
         labels = cut_labels
         was_split = cut if was_split is None else was_split | cut
-    whole = select_clusters(scores, params)
-    labels, selected, trimmed = select_trimmed(labels, t, scores, whole, params)
+    spans = tracked_spans(labels, xyz, t, scores, params)
+    whole = select_clusters(spans, params)
+    labels, selected, trimmed = select_trimmed(labels, t, spans, whole, params)
     selected = reachable_pieces(
         labels, xyz, t, selected, params, frozenset(selected) - frozenset(whole)
     )
@@ -336,20 +384,7 @@ def detect_offline(
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(
         [
-            fit_trajectory(
-                t[labels == c],
-                xyz[labels == c],
-                max_gap=params.max_gap,
-                max_extrapolation=params.max_extrapolation,
-                bin_seconds=params.frame_period / 2,
-                confidence=np.full(int(np.count_nonzero(labels == c)), scores.confidence[c]),
-                context_gap=float(params.link_max_gap),
-                context_window=float(params.link_fit_window),
-                stray_distance=float(params.stray_distance),
-                stray_speed=float(params.link_max_speed),
-                stray_accel=float(params.link_max_accel),
-                stray_window=float(params.link_fit_window),
-            )
+            cluster_trajectory(t[labels == c], xyz[labels == c], scores.confidence[c], params)
             for c in selected
         ],
         params.max_extrapolation,

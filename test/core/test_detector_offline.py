@@ -7,7 +7,12 @@ import dataclasses
 import numpy as np
 
 from clusterfilter_ros.core.frame import MID360, Frame
-from clusterfilter_ros.core.offline import detect_offline, reachable_pieces, select_trimmed
+from clusterfilter_ros.core.offline import (
+    detect_offline,
+    reachable_pieces,
+    select_trimmed,
+    tracked_spans,
+)
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 
@@ -157,3 +162,26 @@ def test_one_stray_return_at_a_piece_end_does_not_make_it_unreachable():
     xyz = np.vstack([path(t0), stray, path(t1)])
     labels = np.repeat([0, 1], [t0.size + 1, t1.size])
     assert reachable_pieces(labels, xyz, t, [1, 0], params) == [1, 0]
+
+
+def test_returns_of_something_else_do_not_stretch_a_track_over_the_next_piece():
+    params = detector_params()
+    rng = np.random.default_rng(3)
+    path = lambda t: np.column_stack([3.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])  # noqa: E731
+    t_a = np.repeat(np.arange(0.0, 10.0, 0.1), 2)
+    # Four returns of another object, climbing away from where the drone was heading.
+    t_junk = np.array([10.7, 11.9, 12.8, 13.5])
+    junk = path(t_junk) + np.column_stack([np.zeros(4), [6.0, 12.0, 18.0, 24.0], [2.0, 4, 6, 8]])
+    t_b = np.repeat(np.arange(10.5, 15.0, 0.1), 2)
+    t = np.concatenate([t_a, t_junk, t_b])
+    xyz = np.vstack([path(t_a), junk, path(t_b)]) + rng.normal(0, 0.05, (t.size, 3))
+    labels = np.repeat([0, 1], [t_a.size + t_junk.size, t_b.size])
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    scores = dataclasses.replace(
+        scores, candidate=np.array([True, True]), confidence=np.array([0.9, 0.7])
+    )
+    assert select_clusters(scores, params) == [0]  # piece 1 overlaps piece 0's junk
+    spans = tracked_spans(labels, xyz, t, scores, params)
+    assert spans.t_last[0] < 10.5 <= spans.t_first[1]
+    assert select_clusters(spans, params) == [0, 1]
+    assert np.array_equal(spans.t_last[1:], scores.t_last[1:])  # span of the track kept
