@@ -3,13 +3,17 @@
 1. Filter every frame (:func:`~clusterfilter_ros.core.preprocess.frame_points`) and
    superimpose all of them into the global cloud.
 2. Denoise the points of ``denoise_sensors`` by density over the whole sequence, and
-   (``static_suppression``) drop points in persistently occupied voxels.
+   (``static_suppression``) drop points in persistently occupied voxels, except the
+   groups a hovering or slowly drifting drone leaves.
 3. Cluster the global cloud (voxel connected components, or DBSCAN) and link the
    fragments of one sparse moving object into one cluster (:mod:`~.linking`).
 4. Score every cluster from its local windows; split a flying cluster too wide to be one
-   object into kinematic tracks (:mod:`~.splitting`) and score those; gate; select the
-   drone cluster(s), a qualifying one that overlaps a selected one in time trimmed to
-   the rest (:func:`select_trimmed`); grow each selected track at its ends by the noise
+   object into kinematic tracks (:mod:`~.splitting`), and one that hovered, then flew,
+   into the stay and the flight, and score those; gate; select the drone cluster(s),
+   overlap in time judged on their trajectories' spans (:func:`tracked_spans`), a
+   qualifying one that overlaps a selected one trimmed to the rest
+   (:func:`select_trimmed`), and only pieces one flight could join
+   (:func:`reachable_pieces`); grow each selected track at its ends by the noise
    points and small clusters it was heading for, and fill it inside with those on its
    path.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
