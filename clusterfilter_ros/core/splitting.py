@@ -48,6 +48,8 @@ _SAME_SAMPLE_OFFSETS = np.array(
 _UNREACHABLE = 1e6
 #: Largest share of a cluster's points in or next to static structure for it to be split.
 MAX_CONTACT = 0.1
+#: Seconds per centroid in :func:`still_run`: several sweeps of a sparse drone's returns.
+STILL_STEP = 0.5
 
 
 def return_groups(
@@ -294,8 +296,7 @@ def still_run(t: np.ndarray, xyz: np.ndarray, params: ParamSet) -> tuple[float, 
     """(first, last) stamp of the longest stretch of at least ``hover_min_seconds`` over
     which one object's returns stayed in a box of ``hover_max_extent`` (half-second
     centroids, no gap longer than ``link_max_gap``), or None."""
-    step = 0.5
-    b = np.floor((t - t.min()) / step).astype(np.int64)
+    b = np.floor((t - t.min()) / STILL_STEP).astype(np.int64)
     ub, inv = np.unique(b, return_inverse=True)
     inv = inv.reshape(-1)
     n = np.bincount(inv).astype(np.float64)
@@ -308,7 +309,7 @@ def still_run(t: np.ndarray, xyz: np.ndarray, params: ParamSet) -> tuple[float, 
     for i in range(ub.size):
         box = np.maximum.accumulate(cen[i:], axis=0) - np.minimum.accumulate(cen[i:], axis=0)
         ok = (box.max(axis=1) <= params.hover_max_extent) & np.r_[
-            True, np.diff(ub[i:]) * step <= params.link_max_gap
+            True, np.diff(ub[i:]) * STILL_STEP <= params.link_max_gap
         ]
         j = i + (int(np.argmin(ok)) if not ok.all() else ok.size) - 1
         length = hi_t[j] - lo_t[i]
