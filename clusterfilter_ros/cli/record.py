@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+    from clusterfilter_ros.ros.node import shutdown_race
     from clusterfilter_ros.ros.record import PoseRecorder
 
     rclpy.init(args=["clusterfilter-record"])
@@ -106,6 +107,10 @@ def run(args: argparse.Namespace) -> int:
                 reason = f"timeout of {args.timeout:g} s"
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
+        reason = "interrupted"
+    except RuntimeError as exc:
+        if not shutdown_race(exc):
+            raise
         reason = "interrupted"
     finally:
         executor.shutdown(timeout_sec=1.0)

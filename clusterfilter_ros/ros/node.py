@@ -655,6 +655,15 @@ def _key_values(**values: Any) -> list[KeyValue]:
     return out
 
 
+def shutdown_race(exc: BaseException, context: Any = None) -> bool:
+    """True when ``exc`` is how rclpy reports a shutdown it raced with: Ctrl-C shuts the
+    context down from rclpy's signal handler, and if that lands while the executor
+    builds its wait set, ``spin`` raises ``RCLError`` ("the given context is not valid"),
+    a RuntimeError, instead of ``ExternalShutdownException``. Any other RuntimeError,
+    or one while the context is still up, is a real error."""
+    return isinstance(exc, RuntimeError) and not rclpy.ok(context=context)
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``detector`` executable (``ros2 run clusterfilter_ros detector``).
 
@@ -673,6 +682,9 @@ def main(args: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"detector: error: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:
+        if not shutdown_race(exc):
+            raise
     finally:
         if node is not None:
             node.destroy_node()

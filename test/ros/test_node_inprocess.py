@@ -287,3 +287,24 @@ def test_drone_cloud_built_only_when_subscribed(rclpy_context, small_sequence, w
         thread.join(timeout=5.0)
         detector.destroy_node()
         client.destroy_node()
+
+
+def test_main_exits_cleanly_when_ctrl_c_races_the_executor(monkeypatch):
+    import rclpy
+
+    from clusterfilter_ros.ros import node as node_module
+
+    def racing_spin(node):
+        rclpy.shutdown()  # what rclpy's SIGINT handler does, from another thread
+        raise RuntimeError("failed to initialize wait set: the given context is not valid")
+
+    monkeypatch.setattr(node_module.rclpy, "spin", racing_spin)
+    assert node_module.main(["detector"]) == 0
+
+    def broken_spin(node):
+        raise RuntimeError("a real error")
+
+    monkeypatch.setattr(node_module.rclpy, "spin", broken_spin)
+    with pytest.raises(RuntimeError, match="a real error"):
+        node_module.main(["detector"])
+    assert not rclpy.ok()  # shut down on the way out all the same
