@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import collections
 import math
+import signal
 import sys
 import threading
 import time
@@ -47,7 +48,7 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -57,6 +58,7 @@ from rclpy.qos import (
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 
 from clusterfilter_ros.config import all_param_specs
@@ -656,27 +658,44 @@ def _key_values(**values: Any) -> list[KeyValue]:
 
 
 def shutdown_race(exc: BaseException, context: Any = None) -> bool:
-    """True when ``exc`` is how rclpy reports a shutdown it raced with: Ctrl-C shuts the
-    context down from rclpy's signal handler, and if that lands while the executor
-    builds its wait set, ``spin`` raises ``RCLError`` ("the given context is not valid"),
-    a RuntimeError, instead of ``ExternalShutdownException``. Any other RuntimeError,
-    or one while the context is still up, is a real error."""
+    """True when ``exc`` is how rclpy reports a shutdown it raced with: when the context
+    is shut down (by rclpy's own signal handler, say) while an executor builds its wait
+    set, ``spin`` raises ``RCLError`` ("the given context is not valid"), a
+    RuntimeError, instead of ``ExternalShutdownException``. Any other RuntimeError, or
+    one while the context is still up, is a real error."""
     return isinstance(exc, RuntimeError) and not rclpy.ok(context=context)
+
+
+#: Seconds the spin loop waits for work before it looks at the stop request again.
+SPIN_PERIOD = 0.1
 
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of the ``detector`` executable (``ros2 run clusterfilter_ros detector``).
 
     ``args`` are ROS command-line arguments (default ``sys.argv``), e.g.
-    ``["--ros-args", "--params-file", "detector.yaml"]``. Returns 0 on Ctrl-C or
+    ``["--ros-args", "--params-file", "detector.yaml"]``. Returns 0 on Ctrl-C, SIGTERM or
     external shutdown, 2 when a parameter is invalid.
+
+    SIGINT and SIGTERM only ask the spin loop to stop. rclpy's own handler shuts the
+    context down from the signal and Python raises KeyboardInterrupt wherever the main
+    thread happens to be: inside the executor that left a "context is not valid" error
+    or a half-built task (a traceback at exit) behind, now and then.
     """
     apply_loopback_defaults()
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    previous = {
+        sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)
+    }
     node = None
+    executor = None
     try:
         node = DetectorNode()
-        rclpy.spin(node)
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=SPIN_PERIOD)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ParameterError as exc:
@@ -686,6 +705,10 @@ def main(args: list[str] | None = None) -> int:
         if not shutdown_race(exc):
             raise
     finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

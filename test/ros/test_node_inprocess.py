@@ -4,6 +4,8 @@ diagnostics, looped stamps, malformed clouds (one rclpy context, loopback DDS)."
 from __future__ import annotations
 
 import dataclasses
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -289,22 +291,42 @@ def test_drone_cloud_built_only_when_subscribed(rclpy_context, small_sequence, w
         client.destroy_node()
 
 
-def test_main_exits_cleanly_when_ctrl_c_races_the_executor(monkeypatch):
-    import rclpy
+def test_main_stops_on_sigint_and_sigterm_without_a_traceback(capfd):
+    import os
+    import signal
 
     from clusterfilter_ros.ros import node as node_module
 
-    def racing_spin(node):
-        rclpy.shutdown()  # what rclpy's SIGINT handler does, from another thread
+    before = signal.getsignal(signal.SIGINT)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        timer = threading.Timer(1.5, os.kill, (os.getpid(), sig))
+        timer.start()
+        started = time.monotonic()
+        assert node_module.main(["detector"]) == 0
+        timer.join()
+        assert time.monotonic() - started < 10.0
+    assert signal.getsignal(signal.SIGINT) is before  # the caller's handler is back
+    err = capfd.readouterr().err
+    assert "stopping: received" in err and "Traceback" not in err
+
+
+def test_main_exits_cleanly_when_a_shutdown_races_the_executor(monkeypatch):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from clusterfilter_ros.ros import node as node_module
+
+    def racing_spin_once(self, timeout_sec=None):
+        rclpy.shutdown()  # the context goes down while the wait set is being built
         raise RuntimeError("failed to initialize wait set: the given context is not valid")
 
-    monkeypatch.setattr(node_module.rclpy, "spin", racing_spin)
+    monkeypatch.setattr(SingleThreadedExecutor, "spin_once", racing_spin_once)
     assert node_module.main(["detector"]) == 0
 
-    def broken_spin(node):
+    def broken_spin_once(self, timeout_sec=None):
         raise RuntimeError("a real error")
 
-    monkeypatch.setattr(node_module.rclpy, "spin", broken_spin)
+    monkeypatch.setattr(SingleThreadedExecutor, "spin_once", broken_spin_once)
     with pytest.raises(RuntimeError, match="a real error"):
         node_module.main(["detector"])
     assert not rclpy.ok()  # shut down on the way out all the same
