@@ -358,10 +358,9 @@ def score_clusters(
             # in 1.5 s, hence the time span too.
             # Extent between the 10th and 90th percentiles per axis: a few returns of a
             # bird passing by must not stretch a hovering drone's cluster past the limit.
-            core_extent = np.max(
-                [np.subtract(*group_quantiles(lab, pts[:, a], k, (0.9, 0.1))) for a in range(3)],
-                axis=0,
-            )
+            quantiles = [group_quantiles(lab, pts[:, a], k, (0.9, 0.1, 0.5)) for a in range(3)]
+            core_extent = np.max([q[0] - q[1] for q in quantiles], axis=0)
+            median_position = np.stack([q[2] for q in quantiles], axis=1)
             hovering = (
                 (core_extent <= params.hover_max_extent)
                 & (res.support_frames >= params.hover_min_frames)
@@ -383,6 +382,13 @@ def score_clusters(
         # residual and acceleration 0.
         res.candidate = _gates(res, counts, params)
         gated = (res.candidate & (res.normalized_score > 0))[lab]
+        if hovering.any():
+            # A hovering candidate is judged on the returns of what stays: one farther than
+            # half of hover_max_extent from its median position on some axis (a stray
+            # return, a bird passing) would make the stay look erratic.
+            member = hovering[lab]
+            off = np.abs(pts[member] - median_position[lab[member]]).max(axis=1)
+            gated[np.flatnonzero(member)[off > 0.5 * float(params.hover_max_extent)]] = False
         g_lab, g_pts, g_t = lab[gated], pts[gated], tt[gated]
         res.residual = multiscale_residual(
             g_lab, g_pts, g_t, k, float(params.residual_window), origin

@@ -91,6 +91,22 @@ def test_hovering_needs_a_time_span_as_well_as_frames():
     assert longer.confidence[0] > params.min_confidence
 
 
+def test_a_hovering_drone_is_judged_without_its_stray_returns():
+    # A drone hovering 21 m away, three returns a second for 20 s, and two returns of
+    # something else 3 m off joined to its cluster: fitted with them, its few returns per
+    # window look erratic (acceleration > max_accel); without them it hovers still.
+    rng = np.random.default_rng(5)
+    params = detector_params()
+    t = np.sort(rng.uniform(0.0, 20.0, 60))
+    xyz = np.array([-16.0, -9.8, 10.2]) + rng.normal(0.0, 0.08, (t.size, 3))
+    t = np.concatenate([t, [6.03, 13.51]])
+    xyz = np.vstack([xyz, [[-13.0, -9.8, 10.5], [-16.2, -12.9, 10.0]]])
+    scores = score_clusters(np.zeros(t.size, int), xyz, t, params, n_clusters=1)
+    assert scores.confidence[0] > params.min_confidence
+    clean = score_clusters(np.zeros(60, int), xyz[:60], t[:60], params, n_clusters=1)
+    assert scores.acceleration[0] == pytest.approx(clean.acceleration[0])
+
+
 def test_paper_score_is_the_formula():
     xyz, t, lab = wall_and_blob(frames=40)
     params = detector_params({"frames": [2.0], "iou_weight": 0.5})
