@@ -59,11 +59,12 @@ def run(args: argparse.Namespace) -> int:
     apply_loopback_defaults()
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
-    from clusterfilter_ros.ros.node import shutdown_race
     from clusterfilter_ros.ros.record import PoseRecorder
+    from clusterfilter_ros.ros.signals import shutdown_race, stop_on_signals
 
-    rclpy.init(args=["clusterfilter-record"])
+    rclpy.init(args=["clusterfilter-record"], signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("clusterfilter_record")
     recorder = PoseRecorder(
         node,
@@ -78,54 +79,58 @@ def run(args: argparse.Namespace) -> int:
     reason = "stopped"
     print(f"record: recording {args.topic} ...", flush=True)
     matched = False
-    try:
-        while True:
-            executor.spin_once(timeout_sec=0.1)
-            now = time.monotonic()
-            if not matched and recorder.matched_publishers() > 0:
-                matched = True
-                print(f"record: matched a publisher of {args.topic}", flush=True)
-            if args.duration is not None and now - started >= args.duration:
-                reason = f"{args.duration:g} s elapsed"
-                break
-            if args.until_idle is not None:
-                idle = recorder.idle_for(now)
-                if idle is not None and idle >= args.until_idle:
-                    reason = f"no pose for {args.until_idle:g} s"
+    with stop_on_signals() as stop:
+        try:
+            while True:
+                executor.spin_once(timeout_sec=0.1)
+                if stop.is_set():
+                    reason = "interrupted"
                     break
-            if args.until_frames is not None:
-                handled = recorder.frames_handled()
-                if handled is not None and handled[0] >= args.until_frames and handled[1] == 0:
-                    # The detector's last poses are published before its diagnostics
-                    # count them, but give the transport a moment.
-                    end = time.monotonic() + 0.5
-                    while time.monotonic() < end:
-                        executor.spin_once(timeout_sec=0.05)
-                    reason = f"detector handled {handled[0]} frames"
+                now = time.monotonic()
+                if not matched and recorder.matched_publishers() > 0:
+                    matched = True
+                    print(f"record: matched a publisher of {args.topic}", flush=True)
+                if args.duration is not None and now - started >= args.duration:
+                    reason = f"{args.duration:g} s elapsed"
                     break
-            if args.timeout is not None and now - started >= args.timeout:
-                reason = f"timeout of {args.timeout:g} s"
-                break
-    except (KeyboardInterrupt, ExternalShutdownException):
-        reason = "interrupted"
-    except RuntimeError as exc:
-        if not shutdown_race(exc):
-            raise
-        reason = "interrupted"
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        written = [str(recorder.write_csv(args.output))]
-        if args.points:
-            written.append(str(recorder.write_points(args.points)))
-        if args.bag:
-            written.append(str(recorder.write_bag(args.bag)))
-        n = len(recorder)
-        if n:
-            pos = recorder.positions()
-            print(f"record: poses stamped {pos.stamps[0]:.3f} .. {pos.stamps[-1]:.3f} s")
-        recorder.destroy()
-        node.destroy_node()
-        rclpy.try_shutdown()
+                if args.until_idle is not None:
+                    idle = recorder.idle_for(now)
+                    if idle is not None and idle >= args.until_idle:
+                        reason = f"no pose for {args.until_idle:g} s"
+                        break
+                if args.until_frames is not None:
+                    handled = recorder.frames_handled()
+                    if handled is not None and handled[0] >= args.until_frames and handled[1] == 0:
+                        # The detector's last poses are published before its diagnostics
+                        # count them, but give the transport a moment.
+                        end = time.monotonic() + 0.5
+                        while time.monotonic() < end:
+                            executor.spin_once(timeout_sec=0.05)
+                        reason = f"detector handled {handled[0]} frames"
+                        break
+                if args.timeout is not None and now - started >= args.timeout:
+                    reason = f"timeout of {args.timeout:g} s"
+                    break
+        except (KeyboardInterrupt, ExternalShutdownException):
+            reason = "interrupted"
+        except RuntimeError as exc:
+            if not shutdown_race(exc):
+                raise
+            reason = "interrupted"
+        finally:
+            executor.shutdown(timeout_sec=1.0)
+            written = [str(recorder.write_csv(args.output))]
+            if args.points:
+                written.append(str(recorder.write_points(args.points)))
+            if args.bag:
+                written.append(str(recorder.write_bag(args.bag)))
+            n = len(recorder)
+            if n:
+                pos = recorder.positions()
+                print(f"record: poses stamped {pos.stamps[0]:.3f} .. {pos.stamps[-1]:.3f} s")
+            recorder.destroy()
+            node.destroy_node()
+            rclpy.try_shutdown()
     print(f"record: {reason}; {n} poses written to {', '.join(written)}", flush=True)
     if n == 0:
         print(f"record: warning: no message arrived on {args.topic}", file=sys.stderr)

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import collections
 import math
-import signal
 import sys
 import threading
 import time
@@ -69,6 +68,7 @@ from clusterfilter_ros.dds import apply_loopback_defaults
 from clusterfilter_ros.errors import ClusterfilterError, ParameterError
 from clusterfilter_ros.io.pointcloud2 import decode_pointcloud2, make_pointcloud2
 from clusterfilter_ros.ros.merge import AddResult, MergedFrame, StampMerger
+from clusterfilter_ros.ros.signals import shutdown_race, stop_on_signals
 from clusterfilter_ros.ros.stamps import seconds_to_time_msg
 from clusterfilter_ros.ros.transforms import Extrinsic
 
@@ -657,15 +657,6 @@ def _key_values(**values: Any) -> list[KeyValue]:
     return out
 
 
-def shutdown_race(exc: BaseException, context: Any = None) -> bool:
-    """True when ``exc`` is how rclpy reports a shutdown it raced with: when the context
-    is shut down (by rclpy's own signal handler, say) while an executor builds its wait
-    set, ``spin`` raises ``RCLError`` ("the given context is not valid"), a
-    RuntimeError, instead of ``ExternalShutdownException``. Any other RuntimeError, or
-    one while the context is still up, is a real error."""
-    return isinstance(exc, RuntimeError) and not rclpy.ok(context=context)
-
-
 #: Seconds the spin loop waits for work before it looks at the stop request again.
 SPIN_PERIOD = 0.1
 
@@ -677,44 +668,33 @@ def main(args: list[str] | None = None) -> int:
     ``["--ros-args", "--params-file", "detector.yaml"]``. Returns 0 on Ctrl-C, SIGTERM or
     external shutdown, 2 when a parameter is invalid.
 
-    SIGINT and SIGTERM only ask the spin loop to stop. rclpy's own handler shuts the
-    context down from the signal and Python raises KeyboardInterrupt wherever the main
-    thread happens to be: inside the executor that left a "context is not valid" error
-    or a half-built task (a traceback at exit) behind, now and then.
+    SIGINT and SIGTERM only ask the spin loop to stop (:mod:`~.signals`).
     """
     apply_loopback_defaults()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
-    previous = {}
-    if threading.current_thread() is threading.main_thread():  # signals reach it alone
-        previous = {
-            sig: signal.signal(sig, lambda *_: stop.set())
-            for sig in (signal.SIGINT, signal.SIGTERM)
-        }
     node = None
     executor = None
-    try:
-        node = DetectorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=SPIN_PERIOD)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ParameterError as exc:
-        print(f"detector: error: {exc}", file=sys.stderr)
-        return 2
-    except RuntimeError as exc:
-        if not shutdown_race(exc):
-            raise
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    with stop_on_signals() as stop:
+        try:
+            node = DetectorNode()
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            while not stop.is_set() and rclpy.ok():
+                executor.spin_once(timeout_sec=SPIN_PERIOD)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except ParameterError as exc:
+            print(f"detector: error: {exc}", file=sys.stderr)
+            return 2
+        except RuntimeError as exc:
+            if not shutdown_race(exc):
+                raise
+        finally:
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0
 
 

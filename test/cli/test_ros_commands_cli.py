@@ -76,6 +76,25 @@ def test_record_without_publisher_writes_empty_csv(tmp_path, ros_env):
 
 
 @pytest.mark.ros
+def test_record_stops_on_ctrl_c_and_writes_its_csv(tmp_path, ros_env):
+    out = tmp_path / "poses.csv"
+    child = processes.start(
+        "record",
+        processes.cli_command("record", str(out), "--topic", "/nobody"),
+        ros_env,
+        tmp_path / "logs",
+    )
+    try:
+        assert processes.wait_for_log(child, "recording /nobody", 60.0), child.log_tail()
+    finally:
+        code = child.interrupt()
+    log = child.log_path.read_text(errors="replace")
+    assert code == 0, log
+    assert "record: interrupted" in log and "Traceback" not in log
+    assert out.read_text() == "timestamp,x,y,z\n"
+
+
+@pytest.mark.ros
 @pytest.mark.slow
 def test_short_demo_writes_outputs(tmp_path, ros_env):
     out = tmp_path / "demo"
