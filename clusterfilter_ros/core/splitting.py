@@ -37,6 +37,7 @@ from scipy.optimize import linear_sum_assignment
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
+from clusterfilter_ros.core.grouping import group_bounds
 from clusterfilter_ros.core.linking import frame_sample_ids, linking_reach
 from clusterfilter_ros.core.params import ParamSet
 from clusterfilter_ros.core.scoring import ClusterScores, select_and_append, structure_contact
@@ -301,10 +302,7 @@ def still_run(t: np.ndarray, xyz: np.ndarray, params: ParamSet) -> tuple[float, 
     inv = inv.reshape(-1)
     n = np.bincount(inv).astype(np.float64)
     cen = np.stack([np.bincount(inv, xyz[:, a]) / n for a in range(3)], axis=1)
-    lo_t = np.full(ub.size, np.inf)
-    hi_t = np.full(ub.size, -np.inf)
-    np.minimum.at(lo_t, inv, t)
-    np.maximum.at(hi_t, inv, t)
+    ((lo_t, hi_t),) = group_bounds(inv, ub.size, t)
     best, best_len = None, float(params.hover_min_seconds)
     for i in range(ub.size):
         box = np.maximum.accumulate(cen[i:], axis=0) - np.minimum.accumulate(cen[i:], axis=0)
