@@ -801,9 +801,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "min_support_frames",
         "int",
-        8,
+        15,
         "Normalized scoring: full confidence needs drone points in at least this many "
-        "distinct frames; fewer scale the confidence down.",
+        "distinct frames; fewer scale the confidence down (a bird's leg seen in a "
+        "handful of frames cannot reach min_confidence).",
         minimum=1,
         maximum=100000,
     ),

@@ -107,6 +107,30 @@ def test_a_hovering_drone_is_judged_without_its_stray_returns():
     assert scores.acceleration[0] == pytest.approx(clean.acceleration[0])
 
 
+def test_a_leg_seen_in_a_handful_of_frames_cannot_reach_min_confidence():
+    # A straight, smooth leg at 8 m/s with one return every fourth frame, scored as
+    # streaming scores (no track confirmation): seen in 8 frames its confidence is
+    # scaled by 8 / min_support_frames and stays below min_confidence, as a bird's
+    # brief leg should; seen in 20 frames the same motion is reported.
+    params = detector_params({"min_track_seconds": 0.0})
+    assert params.min_support_frames == 15
+
+    def leg(frames: int, min_support_frames: int):
+        rng = np.random.default_rng(3)
+        t = np.arange(frames) * 0.4
+        xyz = np.column_stack([-20.0 + 8.0 * t, np.full_like(t, 5.0), np.full_like(t, 25.0)])
+        xyz += rng.normal(0.0, 0.05, xyz.shape)
+        p = params.copy(min_support_frames=min_support_frames)
+        return score_clusters(np.zeros(t.size, int), xyz, t, p, n_clusters=1)
+
+    brief, brief_at_8 = leg(8, 15), leg(8, 8)
+    assert brief.support_frames[0] == 8
+    assert brief_at_8.confidence[0] >= params.min_confidence
+    assert brief.confidence[0] == pytest.approx(brief_at_8.confidence[0] * 8 / 15)
+    assert brief.confidence[0] < params.min_confidence
+    assert leg(20, 15).confidence[0] >= params.min_confidence
+
+
 def test_paper_score_is_the_formula():
     xyz, t, lab = wall_and_blob(frames=40)
     params = detector_params({"frames": [2.0], "iou_weight": 0.5})
