@@ -551,7 +551,8 @@ def track_residual(
     0.07-0.39 m); an erratic bird or a swaying branch leaves much more.
 
     ``acceleration``: instead, the median over a cluster's windows of the fitted
-    acceleration's magnitude (twice the quadratic coefficient), with the windows laid at
+    acceleration's magnitude (twice the quadratic coefficient, refitted without the
+    points left out of the residual), with the windows laid at
     ``phases`` offsets ``window / phases`` apart (all of them pooled). Where a window edge
     falls is arbitrary, and a sparse track's few frames can fit a large acceleration in one
     window and a small one in the window shifted by a fraction of a second; the pooled
@@ -623,15 +624,7 @@ def _window_fits(
     centre = np.bincount(inv, weights=rel, minlength=m) / n
     s = rel - centre[inv]  # time relative to the window's mean time (conditioning)
     powers = np.stack([np.ones_like(s), s, s * s], axis=1)  # (N, 3)
-    gram = np.empty((m, 3, 3))
-    rhs = np.empty((m, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            gram[:, i, j] = gram[:, j, i] = np.bincount(
-                inv, weights=powers[:, i] * powers[:, j], minlength=m
-            )
-        for a in range(3):
-            rhs[:, i, a] = np.bincount(inv, weights=powers[:, i] * pts[:, a], minlength=m)
+    gram, rhs = _normal_equations(inv, powers, pts, m)
     t_lo = rel[starts]
     t_hi = rel[np.append(starts[1:], key.size) - 1]
     span_needed = 0.5 * window if min_span is None else float(min_span)
@@ -651,23 +644,56 @@ def _window_fits(
     rhs[~ok] = 0.0
     # Tiny ridge: windows whose points share few distinct times are near-singular.
     coef = np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)  # (m, 3 powers, 3 axes)
+    fitted = np.einsum("np,npa->na", powers, coef[inv])
+    sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
+    # One stray return metres away (noise the clusterer joined to the track) would
+    # dominate the RMS of a window of a hundred returns: points farther from the fit
+    # than RESIDUAL_OUTLIER_FACTOR times the window's median distance are left out.
+    median = group_median(inv, np.sqrt(sq), m)
+    limit = RESIDUAL_OUTLIER_FACTOR * np.maximum(median, RESIDUAL_MEDIAN_FLOOR)
+    keep = sq <= limit[inv] ** 2
+    n_keep = np.bincount(inv[keep], minlength=m).astype(np.float64)
     if acceleration:
+        # The acceleration is refitted without them (deviation 52): a few noise returns
+        # metres off a drone's path bend a window's quadratic as much as a turn does. A
+        # window left with too few points keeps its first fit.
+        refit = ok & (n_keep < n) & (n_keep >= RESIDUAL_MIN_POINTS)
+        if refit.any():
+            gram, rhs = _normal_equations(inv, powers, pts, m, keep.astype(np.float64))
+            gram[~refit] = np.eye(3)
+            rhs[~refit] = 0.0
+            again = np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)
+            coef[refit] = again[refit]
         per_window = 2.0 * np.linalg.norm(coef[:, 2, :], axis=1)
     else:
-        fitted = np.einsum("np,npa->na", powers, coef[inv])
-        sq = np.einsum("na,na->n", pts - fitted, pts - fitted)
-        # One stray return metres away (noise the clusterer joined to the track) would
-        # dominate the RMS of a window of a hundred returns: points farther from the fit
-        # than RESIDUAL_OUTLIER_FACTOR times the window's median distance are left out.
-        median = group_median(inv, np.sqrt(sq), m)
-        limit = RESIDUAL_OUTLIER_FACTOR * np.maximum(median, RESIDUAL_MEDIAN_FLOOR)
-        keep = sq <= limit[inv] ** 2
-        n_keep = np.bincount(inv[keep], minlength=m).astype(np.float64)
         # Unbiased: the fit spends 3 degrees of freedom per axis.
         per_window = np.sqrt(
             np.bincount(inv[keep], weights=sq[keep], minlength=m) / np.maximum(n_keep - 3.0, 1.0)
         )
     return (cw_u // n_win)[ok], per_window[ok], n[ok]
+
+
+def _normal_equations(
+    inv: np.ndarray,
+    powers: np.ndarray,
+    pts: np.ndarray,
+    m: int,
+    weight: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per window (``inv`` 0..m-1): the (m, 3, 3) Gram matrix of the time ``powers`` and
+    the (m, 3 powers, 3 axes) right-hand sides of a least-squares quadratic fit of
+    ``pts``, each point weighted by ``weight`` (0 leaves it out; default 1)."""
+    w = np.ones(inv.size) if weight is None else weight
+    gram = np.empty((m, 3, 3))
+    rhs = np.empty((m, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            gram[:, i, j] = gram[:, j, i] = np.bincount(
+                inv, weights=w * powers[:, i] * powers[:, j], minlength=m
+            )
+        for a in range(3):
+            rhs[:, i, a] = np.bincount(inv, weights=w * powers[:, i] * pts[:, a], minlength=m)
+    return gram, rhs
 
 
 def group_median(groups: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:

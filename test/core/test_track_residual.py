@@ -152,3 +152,21 @@ def test_a_stray_return_metres_away_does_not_make_a_smooth_track_erratic(monkeyp
     assert track_residual(lab, p_e, t_e, 1, 2.0, 0.0)[0] > 0.5
     monkeypatch.setattr(scoring, "RESIDUAL_OUTLIER_FACTOR", np.inf)
     assert track_residual(lab, stray, t, 1, 2.0, 0.0)[0] > 0.5  # every point counted
+
+
+def test_stray_returns_do_not_bend_the_fitted_acceleration(monkeypatch) -> None:
+    from clusterfilter_ros.core import scoring
+
+    lab = np.zeros(600, dtype=np.int64)
+    t, p = _track(False)
+
+    def accel(points: np.ndarray) -> float:
+        return track_residual(lab, points, t, 1, 1.0, 0.0, acceleration=True, phases=8)[0]
+
+    # One return in 30 (one per second) 4 m off the smooth turn: noise the clusterer
+    # joined to the drone. The acceleration is refitted without them, as the residual is.
+    stray = p.copy()
+    stray[np.arange(7, 600, 30)] += [3.0, 2.0, -1.5]
+    assert accel(stray) == pytest.approx(accel(p), abs=0.05)
+    monkeypatch.setattr(scoring, "RESIDUAL_OUTLIER_FACTOR", np.inf)
+    assert accel(stray) > 3 * accel(p)  # with them, the turn looks three times as sharp
