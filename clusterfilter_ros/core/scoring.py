@@ -659,11 +659,11 @@ def _window_fits(
         # window left with too few points keeps its first fit.
         refit = ok & (n_keep < n) & (n_keep >= RESIDUAL_MIN_POINTS)
         if refit.any():
-            gram, rhs = _normal_equations(inv, powers, pts, m, keep.astype(np.float64))
+            again = np.flatnonzero(refit[inv] & keep)  # kept points of those windows only
+            gram, rhs = _normal_equations(inv[again], powers[again], pts[again], m)
             gram[~refit] = np.eye(3)
             rhs[~refit] = 0.0
-            again = np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)
-            coef[refit] = again[refit]
+            coef[refit] = np.linalg.solve(gram + 1e-9 * np.eye(3), rhs)[refit]
         per_window = 2.0 * np.linalg.norm(coef[:, 2, :], axis=1)
     else:
         # Unbiased: the fit spends 3 degrees of freedom per axis.
@@ -674,25 +674,20 @@ def _window_fits(
 
 
 def _normal_equations(
-    inv: np.ndarray,
-    powers: np.ndarray,
-    pts: np.ndarray,
-    m: int,
-    weight: np.ndarray | None = None,
+    inv: np.ndarray, powers: np.ndarray, pts: np.ndarray, m: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per window (``inv`` 0..m-1): the (m, 3, 3) Gram matrix of the time ``powers`` and
     the (m, 3 powers, 3 axes) right-hand sides of a least-squares quadratic fit of
-    ``pts``, each point weighted by ``weight`` (0 leaves it out; default 1)."""
-    w = np.ones(inv.size) if weight is None else weight
+    ``pts`` (zeros for a window without points)."""
     gram = np.empty((m, 3, 3))
     rhs = np.empty((m, 3, 3))
     for i in range(3):
         for j in range(i, 3):
             gram[:, i, j] = gram[:, j, i] = np.bincount(
-                inv, weights=w * powers[:, i] * powers[:, j], minlength=m
+                inv, weights=powers[:, i] * powers[:, j], minlength=m
             )
         for a in range(3):
-            rhs[:, i, a] = np.bincount(inv, weights=w * powers[:, i] * pts[:, a], minlength=m)
+            rhs[:, i, a] = np.bincount(inv, weights=powers[:, i] * pts[:, a], minlength=m)
     return gram, rhs
 
 
