@@ -178,6 +178,36 @@ def test_narrower_clusters_are_split_only_when_they_fail_as_a_whole():
     assert merged_clusters(scores, params, min_extent=0.5).tolist() == [0, 2, 3]
 
 
+def test_a_bird_linked_into_the_drone_track_for_a_moment_is_split_off():
+    # A sparse drone (one return a frame) and a bird crossing 7 m below it for 1.5 s
+    # with ten returns a frame, joined into one cluster (as linking can join them): in
+    # its local windows the cluster is only 1.5-2 m wide, but not confident.
+    rng = np.random.default_rng(0)
+    stamps = np.arange(0.0, 8.0, 0.1)
+    crossing = stamps[(stamps >= 4.0) & (stamps < 5.5)]
+    bird = _drone(np.full_like(crossing, 4.0)) + np.column_stack(
+        [np.zeros_like(crossing), 12.0 * (crossing - 4.75), np.full_like(crossing, -7.0)]
+    )
+    xyz = np.vstack([_drone(stamps), np.repeat(bird, 10, axis=0)])
+    xyz += rng.normal(0.0, 0.1, xyz.shape)
+    t = np.concatenate([stamps, np.repeat(crossing, 10)])
+    drone = np.arange(t.size) < stamps.size
+    labels = np.zeros(t.size, np.int64)
+    params = detector_params()
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    assert params.split_min_extent < scores.local_extent[0] < 2.0
+    assert scores.confidence[0] < params.min_confidence
+
+    out, k, was_split = split_merged(labels, xyz, t, scores, params)
+    assert k > 1 and was_split.all()
+    after = score_clusters(out, xyz, t, params, n_clusters=k)
+    mine = np.bincount(out[drone]).argmax()
+    assert np.mean(out[drone] == mine) > 0.95 and not np.any(out[~drone] == mine)
+    assert after.confidence[mine] >= params.min_confidence
+    # The 2 m threshold of deviation 36 left such a cluster whole.
+    assert split_merged(labels, xyz, t, scores, params.copy(split_min_extent=2.0))[1] == 1
+
+
 def test_streaming_splits_with_its_own_min_extent(monkeypatch):
     from clusterfilter_ros.core import streaming
 
