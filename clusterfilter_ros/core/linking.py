@@ -371,7 +371,12 @@ def extend_track(
 
 
 def fill_track(
-    member: np.ndarray, xyz: np.ndarray, t: np.ndarray, pool: np.ndarray, params: ParamSet
+    member: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    pool: np.ndarray,
+    params: ParamSet,
+    max_reach: float | None = None,
 ) -> np.ndarray:
     """Fill the gaps inside a selected track with points of ``pool`` lying on its path.
 
@@ -381,8 +386,8 @@ def fill_track(
     point between two consecutive per-frame samples of the track joins it when it lies
     within the linking reach of the position interpolated linearly at its stamp: the
     reach for half the gap (a path bending at ``link_max_accel`` leaves the chord by at
-    most that much at the middle), at most the reach for half of ``link_max_gap``.
-    Returns the new member mask.
+    most that much at the middle), at most the reach for half of ``link_max_gap`` and at
+    most ``max_reach`` when given. Returns the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
@@ -402,5 +407,7 @@ def fill_track(
     w = np.clip((t[idx] - ts[j - 1]) / np.maximum(gap, 1e-9), 0.0, 1.0)[:, None]
     pred = ps[j - 1] + w * (ps[j] - ps[j - 1])
     reach = linking_reach(np.minimum(gap, params.link_max_gap) / 2, params)
+    if max_reach is not None:
+        reach = np.minimum(reach, max_reach)
     member[idx[np.linalg.norm(xyz[idx] - pred, axis=1) <= reach]] = True
     return member

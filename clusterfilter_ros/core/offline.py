@@ -315,17 +315,26 @@ def extend_selected(
 ) -> np.ndarray:
     """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
     and filled inside (:func:`~.linking.fill_track`) by noise points and clusters too
-    small to be scored (< ``min_cluster_points``), except the points in ``exclude``."""
+    small to be scored (< ``min_cluster_points``), and inside also by the points of other
+    scored clusters within ``track_gate`` of its path; never by the points in
+    ``exclude``."""
     # Only what is too small to be judged on its own: a cluster that was scored and
-    # rejected (an erratic bird, say) must not re-enter through a neighbouring track.
+    # rejected (an erratic bird, say) must not extend a track.
     small = scores.n_points < params.min_cluster_points
     pool = (labels < 0) | small[np.maximum(labels, 0)]
+    # Inside the track's span, returns right on its path are the drone's whatever cluster
+    # they were put in: a bird passing a hovering drone takes its returns into its own
+    # cluster for seconds (deviation 54).
+    scored = ~pool & ~np.isin(labels, selected)
     if exclude is not None:
         pool &= ~exclude
+        scored &= ~exclude
     out = labels.copy()
     for c in selected:
         member = fill_track(extend_track(out == c, xyz, t, pool, params), xyz, t, pool, params)
+        member = fill_track(member, xyz, t, scored, params, max_reach=params.track_gate)
         pool &= ~member
+        scored &= ~member
         out[member] = c
     return out
 

@@ -885,7 +885,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "float",
         2.0,
         "Streaming: new points within this distance (m) of the predicted position join the "
-        "track between re-clusterings.",
+        "track between re-clusterings. Offline: inside a selected track's span, points of "
+        "other clusters within it of the track's path join the track.",
         minimum=0.0,
         maximum=50.0,
     ),

@@ -260,6 +260,34 @@ def test_track_growth_does_not_take_a_scored_and_rejected_cluster():
     assert (out[track_t.size : -1] == 1).all()  # the rejected cluster does not
 
 
+def test_a_hovering_track_takes_back_its_returns_from_a_passing_birds_cluster():
+    from clusterfilter_ros.core.offline import extend_selected
+
+    rng = np.random.default_rng(13)
+    hover = np.array([5.0, 10.0, 15.0])
+    drone_t = np.arange(0.0, 12.0, 0.3)
+    drone = hover + rng.normal(0.0, 0.05, (drone_t.size, 3))
+    # From 4 s to 8 s a bird flying past took the drone's returns into its cluster.
+    passing = (drone_t > 4.0) & (drone_t < 8.0)
+    bird_t = np.repeat(np.arange(4.0, 8.0, 0.1), 2)
+    bird = hover + np.column_stack(
+        [2.5 * (bird_t - 6.0), np.full_like(bird_t, 1.5), np.zeros_like(bird_t)]
+    )
+    xyz = np.concatenate([drone, bird])
+    t = np.concatenate([drone_t, bird_t])
+    labels = np.concatenate([np.where(passing, 1, 0), np.ones(bird_t.size, np.int64)])
+    params = detector_params()
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    assert scores.n_points[1] >= params.min_cluster_points  # scored, not too small
+    out = extend_selected(labels, xyz, t, scores, [0], params)
+    assert (out[: drone_t.size] == 0).all()  # the drone's returns are back in its track
+    far = np.linalg.norm(bird - hover, axis=1) > 3.0
+    assert (out[drone_t.size :][far] == 1).all()  # the bird away from it is not
+    # Points in exclude (split pieces, trimmed points) are never taken.
+    ends = extend_selected(labels, xyz, t, scores, [0], params, exclude=labels == 1)
+    assert (ends[: drone_t.size][passing] == 1).all()
+
+
 def test_extend_track_crosses_gaps_up_to_extend_max_gap():
     rng = np.random.default_rng(8)
     xyz, t, _ = _fragments(rng, [0.0], length=1.0)  # last frame at 0.9 s
