@@ -228,6 +228,8 @@ def select_trimmed(
 END_WINDOW = 0.25
 #: ...and the fewest returns averaged there (one stray return must not be an end).
 END_POINTS = 5
+#: Seconds at each end of a selected cluster whose returns give its end velocities.
+VELOCITY_WINDOW = 1.0
 
 
 class _PieceEnds(NamedTuple):
@@ -238,16 +240,30 @@ class _PieceEnds(NamedTuple):
     p_first: np.ndarray
     t_last: float
     p_last: np.ndarray
+    v_first: np.ndarray  # velocity over the first and last VELOCITY_WINDOW (NaN: unknown)
+    v_last: np.ndarray
+
+
+def _velocity(t: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """Least-squares velocity of sorted returns; NaN when they are fewer than
+    :data:`END_POINTS` or span less than a third of :data:`VELOCITY_WINDOW`."""
+    if t.size < END_POINTS or t[-1] - t[0] < VELOCITY_WINDOW / 3:
+        return np.full(3, np.nan)
+    tc = t - t.mean()
+    return (tc @ (xyz - xyz.mean(axis=0))) / float(tc @ tc)
 
 
 def _piece_ends(cluster: int, t: np.ndarray, xyz: np.ndarray) -> _PieceEnds:
     """The piece's ends: at each, the returns within :data:`END_WINDOW` s of its first
-    (last) stamp, or its :data:`END_POINTS` earliest (latest) if that is more."""
+    (last) stamp, or its :data:`END_POINTS` earliest (latest) if that is more, and the
+    velocity of those within :data:`VELOCITY_WINDOW` s."""
     order = np.argsort(t, kind="stable")
     t, xyz = t[order], xyz[order]
     n_first = max(int(np.searchsorted(t, t[0] + END_WINDOW, side="right")), END_POINTS)
     n_last = max(t.size - int(np.searchsorted(t, t[-1] - END_WINDOW, side="left")), END_POINTS)
     head, tail = slice(0, n_first), slice(max(t.size - n_last, 0), t.size)
+    v_head = slice(0, int(np.searchsorted(t, t[0] + VELOCITY_WINDOW, side="right")))
+    v_tail = slice(int(np.searchsorted(t, t[-1] - VELOCITY_WINDOW, side="left")), t.size)
     return _PieceEnds(
         cluster,
         float(t[0]),
@@ -256,7 +272,26 @@ def _piece_ends(cluster: int, t: np.ndarray, xyz: np.ndarray) -> _PieceEnds:
         xyz[head].mean(axis=0),
         float(t[tail].mean()),
         xyz[tail].mean(axis=0),
+        _velocity(t[v_head], xyz[v_head]),
+        _velocity(t[v_tail], xyz[v_tail]),
     )
+
+
+def _joinable(before: _PieceEnds, after: _PieceEnds, params: ParamSet) -> bool:
+    """Whether one flight can go from ``before``'s end to ``after``'s start: within
+    ``link_gate`` + ``link_max_speed`` x gap, and, where both end velocities are known,
+    changing velocity at no more than ``link_max_accel``. The velocities stand about half
+    a :data:`VELOCITY_WINDOW` inside each piece, and lines fitted to a second of sparse
+    returns are uncertain: the time allowed for the change is the gap plus two
+    windows."""
+    gap = max(after.t_first - before.t_last, 0.0)
+    if (
+        np.linalg.norm(after.p_first - before.p_last)
+        > params.link_gate + params.link_max_speed * gap
+    ):
+        return False
+    dv = float(np.linalg.norm(after.v_first - before.v_last))
+    return not dv > params.link_max_accel * (gap + 2 * VELOCITY_WINDOW)
 
 
 def reachable_pieces(
@@ -272,9 +307,11 @@ def reachable_pieces(
     :data:`END_WINDOW` s, at least :data:`END_POINTS` returns) must be within
     ``link_gate`` + ``link_max_speed`` x gap of the end of the nearest better piece
     before it and of the start of the nearest one after it, the gap measured between
-    the mean stamps of the returns averaged. A bird leg taken while the drone was out of
-    view, just before the drone's track starts 80 m higher, is not part of the drone's
-    track.
+    the mean stamps of the returns averaged, and the velocity change between them must
+    be one ``link_max_accel`` allows (:func:`_joinable`). A bird leg taken while the
+    drone was out of view, just before the drone's track starts 80 m higher, or one
+    arriving at 11 m/s where the drone's track starts 4 m away going the other way, is
+    not part of the drone's track.
 
     ``exempt`` clusters (the trimmed ones of :func:`select_trimmed`) are kept and do not
     serve as neighbours: they meet another piece where a bird swapped tracks with the
@@ -291,13 +328,9 @@ def reachable_pieces(
         before = [k for k in kept if k.last <= ends.first]
         after = [k for k in kept if k.first >= ends.last]
         if before:
-            k = max(before, key=lambda k: k.last)
-            reach = params.link_gate + params.link_max_speed * max(ends.t_first - k.t_last, 0.0)
-            ok &= bool(np.linalg.norm(ends.p_first - k.p_last) <= reach)
+            ok &= _joinable(max(before, key=lambda k: k.last), ends, params)
         if after:
-            k = min(after, key=lambda k: k.first)
-            reach = params.link_gate + params.link_max_speed * max(k.t_first - ends.t_last, 0.0)
-            ok &= bool(np.linalg.norm(k.p_first - ends.p_last) <= reach)
+            ok &= _joinable(ends, min(after, key=lambda k: k.first), params)
         if ok:
             kept.append(ends)
     taken = {k.cluster for k in kept} | set(exempt)

@@ -147,6 +147,27 @@ def test_pieces_no_drone_could_join_are_not_one_track():
     assert reachable_pieces(labels, xyz, t, [0, 1, 2], params, frozenset({1})) == [0, 1, 2]
 
 
+def test_a_piece_arriving_fast_the_other_way_is_not_the_drone_track():
+    params = detector_params()
+    along_x = lambda x, t: np.column_stack([x, np.zeros_like(t), np.full_like(t, 20.0)])  # noqa: E731
+    # The drone's track (the better piece) from 5 s: -x at 4 m/s through the origin, 20 m
+    # up, two returns per frame at 10 Hz.
+    t_drone = np.repeat(np.arange(5.0, 10.0, 0.1), 2)
+    t_leg = np.repeat(np.arange(1.0, 4.4, 0.1), 2)  # a leg ending 0.7 s before it starts
+    legs = {
+        # The same flight before it: one track.
+        "drone": (along_x(-4.0 * (t_leg - 5.0), t_leg), [0, 1]),
+        # A bird at 11 m/s the other way, ending 3 m from the drone's start: within
+        # reach, but no drone turns 15 m/s round in 0.7 s.
+        "bird": (along_x(-3.0 + 11.0 * (t_leg - 4.3), t_leg), [0]),
+    }
+    for name, (leg, expected) in legs.items():
+        xyz = np.vstack([along_x(-4.0 * (t_drone - 5.0), t_drone), leg])
+        t = np.concatenate([t_drone, t_leg])
+        labels = np.repeat([0, 1], [t_drone.size, t_leg.size])
+        assert reachable_pieces(labels, xyz, t, [0, 1], params) == expected, name
+
+
 def test_one_stray_return_at_a_piece_end_does_not_make_it_unreachable():
     params = detector_params()
     # A drone at 6 m/s: piece 0 for 3.5 s (10 Hz, two returns per frame), piece 1 from
