@@ -291,7 +291,7 @@ def _joinable(before: _PieceEnds, after: _PieceEnds, params: ParamSet) -> bool:
     ):
         return False
     dv = float(np.linalg.norm(after.v_first - before.v_last))
-    return not dv > params.link_max_accel * (gap + 2 * VELOCITY_WINDOW)
+    return not dv > params.link_max_accel * (gap + 2 * VELOCITY_WINDOW)  # NaN: unknown, kept
 
 
 def reachable_pieces(
@@ -355,8 +355,8 @@ def extend_selected(
     # rejected (an erratic bird, say) must not extend a track.
     small = scores.n_points < params.min_cluster_points
     pool = (labels < 0) | small[np.maximum(labels, 0)]
-    # Inside the track's span, returns right on its path are the drone's whatever cluster
-    # they were put in: a bird passing a hovering drone takes its returns into its own
+    # Inside the track's span, returns close to its path join it whatever cluster they
+    # were put in: a bird passing a hovering drone takes the drone's returns into its own
     # cluster for seconds (deviation 54).
     scored = ~pool & ~np.isin(labels, selected)
     if exclude is not None:
