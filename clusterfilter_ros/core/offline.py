@@ -51,7 +51,12 @@ from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import score_pieces, split_and_score, split_still
-from clusterfilter_ros.core.trajectory import Trajectory, fit_trajectory, merge_trajectories
+from clusterfilter_ros.core.trajectory import (
+    Trajectory,
+    fit_trajectory,
+    merge_trajectories,
+    weighted_line,
+)
 
 
 @dataclass
@@ -249,8 +254,7 @@ def _velocity(t: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     :data:`END_POINTS` or span less than a third of :data:`VELOCITY_WINDOW`."""
     if t.size < END_POINTS or t[-1] - t[0] < VELOCITY_WINDOW / 3:
         return np.full(3, np.nan)
-    tc = t - t.mean()
-    return (tc @ (xyz - xyz.mean(axis=0))) / float(tc @ tc)
+    return weighted_line(t, xyz, np.ones(t.size))[0]
 
 
 def _piece_ends(cluster: int, t: np.ndarray, xyz: np.ndarray) -> _PieceEnds:
