@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.grouping import group_bounds
+from clusterfilter_ros.core.grouping import group_bounds, lex_order
 from clusterfilter_ros.core.params import ParamSet
 
 _MAX_BINS = 64
@@ -39,7 +39,9 @@ def _dilate(static_keys: np.ndarray, dilation: int) -> np.ndarray:
     """Sorted keys of the static voxels plus their 26 neighbours (dilation 1)."""
     if dilation <= 0 or static_keys.size == 0:
         return static_keys
-    return np.unique((static_keys[:, None] + voxel.NEIGHBOURHOOD[None, :]).ravel())
+    return voxel.unique_ints(
+        (static_keys[:, None] + voxel.NEIGHBOURHOOD[None, :]).ravel(), fields=voxel.VOXEL_FIELDS
+    )
 
 
 def compact_static_keys(static_keys: np.ndarray, params: ParamSet) -> np.ndarray:
@@ -86,7 +88,7 @@ def drifting_static_keys(
     k = int(comp.max()) + 1
     n = np.bincount(comp, minlength=k)
     span = (np.asarray(last_bin) - np.asarray(first_bin)) * params.static_bin
-    order = np.lexsort((span, comp))
+    order = lex_order(span, comp)
     starts = np.searchsorted(comp[order], np.arange(k))
     median_span = span[order[starts + (n - 1) // 2]]  # the lower median
     drifting = (n >= 3) & (median_span <= params.static_drift_span)
@@ -113,10 +115,10 @@ def static_offline(
         return np.zeros(0, dtype=bool), np.empty(0, np.int64)
     keys = voxel.voxel_keys(xyz, params.static_voxel)
     bins = np.floor((t - t.min()) / params.static_bin).astype(np.int64)
-    ukeys, kinv = np.unique(keys, return_inverse=True)
+    ukeys, kinv = voxel.unique_ints(keys, return_inverse=True, fields=voxel.VOXEL_FIELDS)
     kinv = kinv.reshape(-1)
     n_bins = int(bins.max()) + 1
-    pairs = np.unique(kinv * n_bins + bins)
+    pairs = voxel.unique_ints(kinv * n_bins + bins)
     pair_voxel, pair_bin = np.divmod(pairs, n_bins)
     bins_per_voxel = np.bincount(pair_voxel, minlength=ukeys.size)
     persistent = bins_per_voxel >= params.static_min_bins

@@ -71,7 +71,7 @@ def voxel_cluster_points(
     if xyz.shape[0] == 0:
         return np.empty(0, dtype=np.int64)
     keys = voxel.voxel_keys(xyz, cluster_voxel)
-    ukeys, inverse = np.unique(keys, return_inverse=True)
+    ukeys, inverse = voxel.unique_ints(keys, return_inverse=True, fields=voxel.VOXEL_FIELDS)
     w = np.ones(xyz.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
     per_voxel = np.bincount(inverse.reshape(-1), weights=w, minlength=ukeys.size)
     return voxel_clusters(ukeys, per_voxel, min_samples)[inverse.reshape(-1)]
@@ -88,7 +88,9 @@ def spacetime_cluster_points(
     if xyz.shape[0] == 0:
         return np.empty(0, dtype=np.int64)
     keys = voxel.spacetime_keys(xyz, t, cluster_voxel, time_bin)
-    ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    ukeys, inverse, counts = voxel.unique_ints(
+        keys, return_inverse=True, return_counts=True, fields=voxel.SPACETIME_FIELDS
+    )
     offsets = np.array([voxel.spacetime_offset_key(o) for o in voxel.HALF_OFFSETS_4D])
     return voxel_clusters(ukeys, counts, min_samples, offsets)[inverse.reshape(-1)]
 
@@ -113,7 +115,9 @@ def density_mask(xyz: np.ndarray, denoise_voxel: float, min_points: int) -> np.n
     if xyz.shape[0] == 0:
         return np.zeros(0, dtype=bool)
     keys = voxel.voxel_keys(xyz, denoise_voxel)
-    ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    ukeys, inverse, counts = voxel.unique_ints(
+        keys, return_inverse=True, return_counts=True, fields=voxel.VOXEL_FIELDS
+    )
     density = voxel.neighbourhood_sums(ukeys, counts)
     return density[inverse.reshape(-1)] >= min_points
 
@@ -124,7 +128,7 @@ def relabel_compact(labels: np.ndarray) -> tuple[np.ndarray, int]:
     valid = labels >= 0
     if not valid.any():
         return labels.copy(), 0
-    uniq, inv = np.unique(labels[valid], return_inverse=True)
+    uniq, inv = voxel.unique_ints(labels[valid], return_inverse=True)
     out = np.full(labels.shape, -1, dtype=np.int64)
     out[valid] = inv.reshape(-1)
     return out, int(uniq.size)
@@ -153,7 +157,7 @@ def merge_colocated_compact(
     if compact.size < 2:
         return labels, k
     keys = voxel.voxel_keys(centroid[compact], max_extent)
-    uk, inv = np.unique(keys, return_inverse=True)
+    uk, inv = voxel.unique_ints(keys, return_inverse=True, fields=voxel.VOXEL_FIELDS)
     group = voxel_clusters(uk, np.ones(uk.size), 0.0)[inv.reshape(-1)]
     n_groups = int(group.max()) + 1
     (g_lo, _), (_, g_hi) = group_bounds(group, n_groups, lo[compact], hi[compact])

@@ -33,7 +33,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from clusterfilter_ros.core.grouping import group_bounds
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.grouping import group_bounds, lex_order
 from clusterfilter_ros.core.params import ParamSet
 
 #: Candidate pairs are formed in blocks of at most this many clusters and about this
@@ -67,16 +68,20 @@ def frame_sample_ids(labels: np.ndarray, t: np.ndarray, frame_period: float) -> 
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     if t.size == 0:
         return np.empty(0, dtype=np.int64)
-    order = np.lexsort((t, labels))
+    order = lex_order(t, labels)
     lab_s, t_s = labels[order], t[order]
     new = np.ones(t_s.size, dtype=bool)
     new[1:] = (lab_s[1:] != lab_s[:-1]) | (np.diff(t_s) > frame_period / 2)
     run_start = np.maximum.accumulate(np.where(new, np.arange(t_s.size), 0))
     within = np.floor((t_s - t_s[run_start]) / frame_period + 1e-6).astype(np.int64)
     key_s = (np.cumsum(new) - 1) * (int(within.max()) + 1) + within
-    key = np.empty_like(key_s)
-    key[order] = key_s
-    return np.unique(key, return_inverse=True)[1].reshape(-1)
+    # key_s never decreases along the sorted points, so numbering its changes gives the
+    # same ids as np.unique(key, return_inverse=True) without a second sort.
+    step = np.ones(key_s.size, dtype=bool)
+    np.not_equal(key_s[1:], key_s[:-1], out=step[1:])
+    ids = np.empty(key_s.size, dtype=np.int64)
+    ids[order] = np.cumsum(step) - 1
+    return ids
 
 
 def _frame_samples(
@@ -179,7 +184,7 @@ def chains_formed(before: np.ndarray, after: np.ndarray, k_after: int) -> np.nda
     """(K_after,) bool: the clusters of ``after`` that joined several of ``before``."""
     keep = before >= 0
     width = int(before.max()) + 1
-    pairs = np.unique(after[keep] * width + before[keep])
+    pairs = voxel.unique_ints(after[keep] * width + before[keep])
     return np.bincount(pairs // width, minlength=k_after) > 1
 
 
@@ -287,7 +292,7 @@ def link_fragments(
         if np.array_equal(new, root):
             break
         root = new
-    _, compact = np.unique(root, return_inverse=True)
+    _, compact = voxel.unique_ints(root, return_inverse=True)
     out = labels.copy()
     out[keep] = compact.reshape(-1)[lab]
     return out, int(compact.max()) + 1

@@ -34,7 +34,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.grouping import group_bounds
+from clusterfilter_ros.core.grouping import group_bounds, lex_order
 from clusterfilter_ros.core.params import ParamSet
 
 
@@ -152,7 +152,7 @@ def local_window_features(
     labels: np.ndarray,
     xyz: np.ndarray,
     t: np.ndarray,
-    fine_keys: np.ndarray,
+    fine_ids: np.ndarray,
     global_density: np.ndarray,
     window_seconds: float,
     t0: float,
@@ -162,7 +162,8 @@ def local_window_features(
 
     Returns ``sum_exp_r``, ``sum_r_capped`` (sum of min(R, 1)), ``n_windows``,
     ``sum_log_inv_iou``, ``sum_iou``, ``n_pairs`` and ``sum_extent`` (sum over windows of
-    the largest bounding-box side of the window's points). ``labels`` must be 0..K-1.
+    the largest bounding-box side of the window's points). ``labels`` must be 0..K-1;
+    ``fine_ids`` number the points' ``voxel_size`` voxels 0..V-1.
     """
     k = global_density.shape[0]
     out = {name: np.zeros(k) for name in _SUMS}
@@ -171,15 +172,15 @@ def local_window_features(
     win = np.floor((t - t0) / window_seconds + 1e-6).astype(np.int64)
     win -= win.min()
     n_win = int(win.max()) + 1
-    _, fid = np.unique(fine_keys, return_inverse=True)
+    fid = fine_ids
     n_fine = int(fid.max()) + 1
     # (cluster, window) point counts and voxel counts.
     cw = labels * n_win + win
-    cw_u, cw_inv, cw_points = np.unique(cw, return_inverse=True, return_counts=True)
+    cw_u, cw_inv, cw_points = voxel.unique_ints(cw, return_inverse=True, return_counts=True)
     cw_inv = cw_inv.reshape(-1)
     ((lo, hi),) = group_bounds(cw_inv, cw_u.size, xyz)
     triple = (labels * n_fine + fid.reshape(-1)) * n_win + win
-    triple_u = np.unique(triple)
+    triple_u = voxel.unique_ints(triple)
     t_cw = (triple_u // (n_win * n_fine)) * n_win + triple_u % n_win
     t_cw_idx = np.searchsorted(cw_u, t_cw)
     cw_voxels = np.bincount(t_cw_idx, minlength=cw_u.size).astype(np.float64)
@@ -225,7 +226,9 @@ def structure_contact(
     sel = which[lab]
     if not sel.any():
         return out
-    keys, inverse = np.unique(voxel.voxel_keys(pts[sel], voxel_size), return_inverse=True)
+    keys, inverse = voxel.unique_ints(
+        voxel.voxel_keys(pts[sel], voxel_size), return_inverse=True, fields=voxel.VOXEL_FIELDS
+    )
     around = keys[:, None] + voxel.NEIGHBOURHOOD[None, :]
     touching = (voxel.lookup(structure_keys, around.ravel()) >= 0).reshape(around.shape)
     per_point = touching.any(axis=1)[inverse.reshape(-1)]
@@ -283,14 +286,14 @@ def score_clusters(
     pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[keep]
     tt = np.asarray(t, dtype=np.float64)[keep]
     vs = float(params.voxel_size)
-    fine = voxel.voxel_keys(pts, vs)
+    # Each point's voxel_size voxel, numbered 0..V-1 (once for every window length).
+    fid = voxel.unique_voxel_keys(pts, vs)[2].reshape(-1)
     counts = np.bincount(lab, minlength=k).astype(np.float64)
     if global_points is None or global_voxels is None:
         g_vox = np.zeros(k)
         if lab.size:
-            _, fid = np.unique(fine, return_inverse=True)
             n_fine = int(fid.max()) + 1
-            pair_u = np.unique(lab * n_fine + fid.reshape(-1))
+            pair_u = voxel.unique_ints(lab * n_fine + fid.reshape(-1))
             g_vox = np.bincount(pair_u // n_fine, minlength=k).astype(np.float64)
         g_pts = counts.copy()
     else:
@@ -313,14 +316,14 @@ def score_clusters(
         origin = float(tt.min()) if t0 is None else float(t0)
         fp = float(params.frame_period)
         frame_bin = np.floor((tt - origin) / fp + 1e-6).astype(np.int64)
-        fb = np.unique(lab * (int(frame_bin.max()) + 1) + frame_bin)
+        fb = voxel.unique_ints(lab * (int(frame_bin.max()) + 1) + frame_bin)
         res.support_frames = np.bincount(fb // (int(frame_bin.max()) + 1), minlength=k).astype(
             np.float64
         )
         sums = {n: np.zeros(k) for n in _SUMS}
         for i, w in enumerate(sorted(params.frames)):
             part = local_window_features(
-                lab, pts, tt, fine, global_density, float(w) * fp, origin, float(params.iou_floor)
+                lab, pts, tt, fid, global_density, float(w) * fp, origin, float(params.iou_floor)
             )
             if i == 0:  # extent over the shortest windows
                 res.local_extent = part["sum_extent"] / np.maximum(part["n_windows"], 1.0)
@@ -482,7 +485,7 @@ def motion_coherence(
     win = np.floor((t - (t.min() if origin is None else origin)) / window).astype(np.int64)
     win -= win.min()
     n_win = int(win.max()) + 1
-    cw_u, cw_inv = np.unique(lab * n_win + win, return_inverse=True)
+    cw_u, cw_inv = voxel.unique_ints(lab * n_win + win, return_inverse=True)
     cw_inv = cw_inv.reshape(-1)
     cw_n = np.bincount(cw_inv).astype(np.float64)
     cw_c = np.stack([np.bincount(cw_inv, weights=pts[:, a]) for a in range(3)], axis=1)
@@ -507,7 +510,7 @@ def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int
     if lab.size == 0:
         return np.zeros(k)
     nb = int(frame_bin.max()) + 1
-    u, inv = np.unique(lab * nb + frame_bin, return_inverse=True)
+    u, inv = voxel.unique_ints(lab * nb + frame_bin, return_inverse=True)
     inv = inv.reshape(-1)
     n = np.bincount(inv).astype(np.float64)
     c = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1) / n[:, None]
@@ -564,17 +567,14 @@ def track_residual(
         return (out, none) if evidence else out
     n_phase = max(1, int(phases)) if acceleration else 1
     # Sorted by cluster, then time: each window grid's windows are then runs of points.
-    order = np.lexsort((t, lab))
+    order = lex_order(t, lab)
     lab, pts, t = lab[order], pts[order], t[order]
-    parts = [
-        _window_fits(lab, pts, t, window, t0 - i * window / n_phase, acceleration, min_span, t0)
-        for i in range(n_phase)
-    ]
-    cluster = np.concatenate([c for c, _, _ in parts])
+    origins = [t0 - i * window / n_phase for i in range(n_phase)]
+    cluster, values, counts = _window_fits(
+        lab, pts, t, k, window, origins, acceleration, min_span, t0
+    )
     if cluster.size == 0:
         return (out, none) if evidence else out
-    values = np.concatenate([v for _, v, _ in parts])
-    counts = np.concatenate([n for _, _, n in parts])
     weight = np.bincount(cluster, weights=counts, minlength=k)
     if acceleration:
         # Median over windows: one short, sparse window's fit is easily far off.
@@ -589,15 +589,17 @@ def _window_fits(
     lab: np.ndarray,
     pts: np.ndarray,
     t: np.ndarray,
+    k: int,
     window: float,
-    t0: float,
+    origins: list[float],
     acceleration: bool,
     min_span: float | None,
     instant_origin: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The (cluster, window) quadratic fits of :func:`track_residual` for one window grid:
-    (cluster id, residual or acceleration, point count) per window with enough evidence.
-    The points must be sorted by cluster, then time.
+    """The (cluster, window) quadratic fits of :func:`track_residual`, for one window grid
+    per entry of ``origins`` (all grids in one vectorised pass, the points repeated once
+    per grid): (cluster id, residual or acceleration, point count) per window with enough
+    evidence, grid by grid. The points must be sorted by cluster, then time.
     Distinct instants are counted on a 0.05 s grid from ``instant_origin`` (the same for
     every window grid and every subset of clusters), or from the first point if that is
     absurdly far."""
@@ -605,12 +607,22 @@ def _window_fits(
     t_min = float(t.min())
     rel = t - t_min
     span = float(rel.max()) / window
-    offset = (t_min - t0) / window if math.isfinite(t_min - t0) else 0.0
-    if not (math.isfinite(span) and span < 1e9 and 0.0 <= offset < 1e9):
-        offset = 0.0  # stamps far from t0: windows aligned to the first point instead
-        if not (math.isfinite(span) and span < 1e9):
-            return empty  # absurd time spans: no evidence
-    win = np.floor(rel / window + (offset % 1.0) + 1e-9).astype(np.int64)
+    fractions = []
+    for t0 in origins:
+        offset = (t_min - t0) / window if math.isfinite(t_min - t0) else 0.0
+        if not (math.isfinite(span) and span < 1e9 and 0.0 <= offset < 1e9):
+            offset = 0.0  # stamps far from t0: windows aligned to the first point instead
+            if not (math.isfinite(span) and span < 1e9):
+                return empty  # absurd time spans: no evidence
+        fractions.append(offset % 1.0)
+    n_grid = len(fractions)
+    if n_grid > 1:
+        # Grid g's copy of cluster c is cluster g * k + c: still sorted by cluster, time.
+        lab = (np.arange(n_grid)[:, None] * k + lab[None, :]).reshape(-1)
+        pts = np.tile(pts, (n_grid, 1))
+        rel = np.tile(rel, n_grid)
+    fraction = np.repeat(np.asarray(fractions), lab.size // n_grid)
+    win = np.floor(rel / window + fraction + 1e-9).astype(np.int64)
     n_win = int(win.max()) + 1
     key = lab * n_win + win  # non-decreasing: sorted by cluster, then time
     first = np.empty(key.size, dtype=bool)
@@ -670,7 +682,7 @@ def _window_fits(
         per_window = np.sqrt(
             np.bincount(inv[keep], weights=sq[keep], minlength=m) / np.maximum(n_keep - 3.0, 1.0)
         )
-    return (cw_u // n_win)[ok], per_window[ok], n[ok]
+    return ((cw_u // n_win) % k)[ok], per_window[ok], n[ok]
 
 
 def _normal_equations(
@@ -710,7 +722,7 @@ def group_quantiles(
     out = np.zeros((len(qs), k))
     if groups.size == 0:
         return out
-    order = np.lexsort((values, groups))
+    order = lex_order(values, groups)
     g, v = groups[order], np.asarray(values, dtype=np.float64)[order]
     counts = np.bincount(g, minlength=k)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])

@@ -37,7 +37,7 @@ from scipy.optimize import linear_sum_assignment
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.clustering import relabel_compact, voxel_clusters
-from clusterfilter_ros.core.grouping import group_bounds
+from clusterfilter_ros.core.grouping import group_bounds, lex_order
 from clusterfilter_ros.core.linking import frame_sample_ids, linking_reach
 from clusterfilter_ros.core.params import ParamSet
 from clusterfilter_ros.core.scoring import ClusterScores, select_and_append, structure_contact
@@ -66,7 +66,7 @@ def return_groups(
         return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
     sample = frame_sample_ids(np.zeros(t.size, dtype=np.int64), t, frame_period)
     keys = voxel.spacetime_keys(xyz, sample.astype(np.float64), blob, 1.0)
-    ukeys, inverse = np.unique(keys, return_inverse=True)
+    ukeys, inverse = voxel.unique_ints(keys, return_inverse=True, fields=voxel.SPACETIME_FIELDS)
     inverse = inverse.reshape(-1)
     comp = voxel_clusters(ukeys, np.ones(ukeys.size), 1.0, _SAME_SAMPLE_OFFSETS)
     groups, n_groups = relabel_compact(comp[inverse])
@@ -130,7 +130,7 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
     n = np.bincount(groups).astype(np.float64)
     g_t = np.bincount(groups, weights=t) / n
     # Groups in processing order: by frame sample, then time.
-    order = np.lexsort((g_t, group_sample))
+    order = lex_order(g_t, group_sample)
     g_t = g_t[order]
     g_p = np.stack([np.bincount(groups, weights=xyz[:, a]) for a in range(3)], axis=1)
     g_p = (g_p / n[:, None])[order]
@@ -298,7 +298,7 @@ def still_run(t: np.ndarray, xyz: np.ndarray, params: ParamSet) -> tuple[float, 
     which one object's returns stayed in a box of ``hover_max_extent`` (half-second
     centroids, no gap longer than ``link_max_gap``), or None."""
     b = np.floor((t - t.min()) / STILL_STEP).astype(np.int64)
-    ub, inv = np.unique(b, return_inverse=True)
+    ub, inv = voxel.unique_ints(b, return_inverse=True)
     inv = inv.reshape(-1)
     n = np.bincount(inv).astype(np.float64)
     cen = np.stack([np.bincount(inv, xyz[:, a]) / n for a in range(3)], axis=1)

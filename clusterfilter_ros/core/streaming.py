@@ -149,8 +149,7 @@ class StreamingDetector:
         if frame.sensor in self.params.denoise_sensors:
             keep = np.flatnonzero(self._denoise(frame.sensor, stamp, xyz))
             xyz, t = xyz.take(keep, axis=0), t.take(keep)
-        static_keys = voxel.voxel_keys(xyz, self.params.static_voxel)
-        uk, inverse = np.unique(static_keys, return_inverse=True)
+        static_keys, uk, inverse = voxel.unique_voxel_keys(xyz, self.params.static_voxel)
         inverse = inverse.reshape(-1)
         self._pending.append(self._distinct_hits(uk, static_keys, t))
         if self.params.static_suppression and self._static.size and xyz.shape[0]:
@@ -206,9 +205,8 @@ class StreamingDetector:
         """Keep points whose neighbourhood over the recent frames of this sensor is dense."""
         p = self.params
         recent = self._denoise_recent.setdefault(sensor, voxel.SlidingVoxelCounts())
-        keys = voxel.voxel_keys(xyz, p.denoise_voxel)
         recent.evict_before(self._now - p.denoise_window)
-        uk, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        _, uk, inverse, counts = voxel.unique_voxel_keys(xyz, p.denoise_voxel, return_counts=True)
         recent.add_unique(stamp, uk, counts)
         if xyz.shape[0] == 0:
             return np.zeros(0, bool)
@@ -425,13 +423,22 @@ class StreamingDetector:
 
     def _drop_static_from_history(self) -> None:
         """Remove points of voxels that have become static from the local history."""
-        for i, c in enumerate(self._chunks):
-            if c.xyz.shape[0] == 0:
-                continue
-            moving = voxel.lookup(self._static, c.static_keys) < 0
-            if not moving.all():
-                self._chunk_points -= int(np.count_nonzero(~moving))
-                self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
+        if not self._chunk_points:
+            return
+        # One lookup over the whole history (a chunk per frame: thousands at high rates),
+        # then only the chunks that hold static points are rebuilt.
+        sizes = np.fromiter((c.t.shape[0] for c in self._chunks), np.int64, len(self._chunks))
+        keys = np.concatenate([c.static_keys for c in self._chunks])
+        static = voxel.lookup(self._static, keys) >= 0
+        if not static.any():
+            return
+        chunk_of = np.repeat(np.arange(sizes.size), sizes)
+        ends = np.cumsum(sizes)
+        for i in np.unique(chunk_of[static]):
+            c = self._chunks[i]
+            moving = ~static[ends[i] - sizes[i] : ends[i]]
+            self._chunk_points -= int(sizes[i] - np.count_nonzero(moving))
+            self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
 
     def _rebuild_track(self, mask: np.ndarray, xyz: np.ndarray, t: np.ndarray) -> None:
         """The track from the points in ``mask``: one sample per half frame period,

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import make_smoothing_spline
 
+from clusterfilter_ros.core.voxel import unique_ints
+
 
 def time_samples(
     t: np.ndarray, xyz: np.ndarray, bin_seconds: float
@@ -32,7 +34,7 @@ def time_samples(
     if t.size == 0:
         return np.empty(0), np.empty((0, 3)), np.empty(0)
     b = np.floor((t - t.min()) / bin_seconds).astype(np.int64)
-    ub, inv, counts = np.unique(b, return_inverse=True, return_counts=True)
+    ub, inv, counts = unique_ints(b, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     tm = np.bincount(inv, weights=t) / counts
     pos = np.stack([np.bincount(inv, weights=xyz[:, a]) / counts for a in range(3)], axis=1)

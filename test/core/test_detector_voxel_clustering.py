@@ -110,3 +110,78 @@ def test_merge_colocated_compact_joins_pieces_at_one_spot_only():
     assert k == 3
     assert len(set(merged[:12].tolist())) == 1
     assert len({merged[0], merged[12], merged[18]}) == 3
+
+
+def _unique_cases():
+    rng = np.random.default_rng(11)
+    near = rng.normal(0.0, 20.0, (10_000, 3))  # a frame's worth of points: a dense table
+    far = rng.normal(0.0, 2_000.0, (10_000, 3))  # too spread out for one: numpy's sort
+    t = rng.uniform(0.0, 10.0, 10_000)
+    return [
+        ("labels", rng.integers(0, 400, 5000), None, True),
+        ("negative int32", rng.integers(-50, 50, 3000).astype(np.int32), None, True),
+        ("voxel keys", voxel.voxel_keys(near, 1.5), voxel.VOXEL_FIELDS, True),
+        (
+            "space-time keys",
+            voxel.spacetime_keys(0.4 * near, t, 2.0, 0.5),
+            voxel.SPACETIME_FIELDS,
+            True,
+        ),
+        ("spread voxel keys", voxel.voxel_keys(far, 0.2), voxel.VOXEL_FIELDS, False),
+        ("few voxel keys", voxel.voxel_keys(near[:50], 1.5), voxel.VOXEL_FIELDS, False),
+        ("wide ints", rng.integers(0, 1 << 40, 2000), None, False),
+        ("one", np.array([7]), None, True),
+    ]
+
+
+@pytest.mark.parametrize("case", _unique_cases(), ids=lambda c: c[0])
+def test_unique_ints_equals_numpy_unique(case):
+    _, values, fields, dense = case
+    # The case exercises the path it is named for.
+    assert (voxel._dense_code(values, values.size, fields)[0] is not None) is dense
+    for inverse in (False, True):
+        for counts in (False, True):
+            want = np.unique(values, return_inverse=inverse, return_counts=counts)
+            got = voxel.unique_ints(
+                values, return_inverse=inverse, return_counts=counts, fields=fields
+            )
+            want, got = (want, got) if inverse or counts else ((want,), (got,))
+            assert len(got) == len(want)
+            for g, w in zip(got, want, strict=True):
+                assert g.dtype == w.dtype
+                assert np.array_equal(g.reshape(-1), w.reshape(-1))
+
+
+def test_unique_ints_of_nothing():
+    uk, inv, cnt = voxel.unique_ints(
+        np.empty(0, np.int64), return_inverse=True, return_counts=True, fields=voxel.VOXEL_FIELDS
+    )
+    assert uk.size == inv.size == cnt.size == 0
+
+
+@pytest.mark.parametrize("spread, n", [(20.0, 10_000), (2_000.0, 10_000), (20.0, 300), (1.0, 0)])
+def test_unique_voxel_keys_equal_voxel_keys_and_numpy_unique(spread, n):
+    xyz = np.random.default_rng(5).normal(0.0, spread, (n, 3)).astype(np.float32)
+    keys, uk, inverse, counts = voxel.unique_voxel_keys(xyz, 1.5, return_counts=True)
+    want_keys = voxel.voxel_keys(xyz, 1.5)
+    want = np.unique(want_keys, return_inverse=True, return_counts=True)
+    assert np.array_equal(keys, want_keys)
+    for got, ref in zip((uk, inverse, counts), want, strict=True):
+        assert got.dtype == ref.dtype and np.array_equal(got.reshape(-1), ref.reshape(-1))
+    assert len(voxel.unique_voxel_keys(xyz, 1.5)) == 3
+
+
+def test_unique_ints_tables_are_reused_cleanly_across_calls_and_threads():
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(8)
+    inputs = [rng.integers(0, high, size) for high, size in ((50_000, 9_000), (40, 500))] * 3
+
+    def check(values):
+        got = voxel.unique_ints(values, return_inverse=True, return_counts=True)
+        want = np.unique(values, return_inverse=True, return_counts=True)
+        return all(np.array_equal(g, w) for g, w in zip(got, want, strict=True))
+
+    assert all(check(v) for v in inputs)  # a big table, then a small one, and again
+    with ThreadPoolExecutor(4) as pool:
+        assert all(pool.map(check, inputs * 4))

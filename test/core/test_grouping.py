@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from clusterfilter_ros.core.grouping import group_bounds
+from clusterfilter_ros.core.grouping import group_bounds, lex_order, stable_order
 
 
 def test_group_bounds_match_ufunc_at():
@@ -30,3 +31,21 @@ def test_group_bounds_of_nothing():
     ((lo, hi),) = group_bounds(np.empty(0, np.int64), 3, np.empty((0, 3)))
     assert lo.shape == (3, 3) and np.all(lo == np.inf) and np.all(hi == -np.inf)
     assert group_bounds(np.array([0, 1]), 2) == []
+
+
+@pytest.mark.parametrize("high", [1, 300, 65_536, 70_000])
+def test_stable_order_and_lex_order_equal_numpy(high):
+    rng = np.random.default_rng(high)
+    ids = rng.integers(0, high, 5000)
+    t = np.round(rng.uniform(0, 2, 5000), 1)  # many ties: the stable order must hold
+    t[::97] = np.nan
+    assert np.array_equal(stable_order(ids), np.argsort(ids, kind="stable"))
+    assert np.array_equal(lex_order(t, ids), np.lexsort((t, ids)))
+    negative = ids - high // 2
+    assert np.array_equal(stable_order(negative), np.argsort(negative, kind="stable"))
+    assert np.array_equal(lex_order(t, negative), np.lexsort((t, negative)))
+
+
+def test_stable_order_of_nothing():
+    assert stable_order(np.empty(0, np.int64)).size == 0
+    assert lex_order(np.empty(0), np.empty(0, np.int64)).size == 0
