@@ -113,9 +113,8 @@ def static_offline(
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
         return np.zeros(0, dtype=bool), np.empty(0, np.int64)
-    keys = voxel.voxel_keys(xyz, params.static_voxel)
+    keys, ukeys, kinv = voxel.unique_voxel_keys(xyz, params.static_voxel)
     bins = np.floor((t - t.min()) / params.static_bin).astype(np.int64)
-    ukeys, kinv = voxel.unique_ints(keys, return_inverse=True, fields=voxel.VOXEL_FIELDS)
     kinv = kinv.reshape(-1)
     n_bins = int(bins.max()) + 1
     pairs = voxel.unique_ints(kinv * n_bins + bins)

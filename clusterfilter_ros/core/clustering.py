@@ -70,8 +70,7 @@ def voxel_cluster_points(
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
         return np.empty(0, dtype=np.int64)
-    keys = voxel.voxel_keys(xyz, cluster_voxel)
-    ukeys, inverse = voxel.unique_ints(keys, return_inverse=True, fields=voxel.VOXEL_FIELDS)
+    _, ukeys, inverse = voxel.unique_voxel_keys(xyz, cluster_voxel)
     w = np.ones(xyz.shape[0]) if weights is None else np.asarray(weights, dtype=np.float64)
     per_voxel = np.bincount(inverse.reshape(-1), weights=w, minlength=ukeys.size)
     return voxel_clusters(ukeys, per_voxel, min_samples)[inverse.reshape(-1)]
@@ -114,10 +113,7 @@ def density_mask(xyz: np.ndarray, denoise_voxel: float, min_points: int) -> np.n
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    keys = voxel.voxel_keys(xyz, denoise_voxel)
-    ukeys, inverse, counts = voxel.unique_ints(
-        keys, return_inverse=True, return_counts=True, fields=voxel.VOXEL_FIELDS
-    )
+    _, ukeys, inverse, counts = voxel.unique_voxel_keys(xyz, denoise_voxel, return_counts=True)
     density = voxel.neighbourhood_sums(ukeys, counts)
     return density[inverse.reshape(-1)] >= min_points
 

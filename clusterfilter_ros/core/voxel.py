@@ -182,6 +182,9 @@ SPACETIME_FIELDS = (_S_BITS, _S_BITS, _S_BITS, _T_BITS)
 _DENSE_CELLS_PER_VALUE = 48
 _DENSE_MIN_CELLS = 1 << 12
 _DENSE_FIELDS_MIN_VALUES = 1 << 13
+#: Above this many values the keys are a whole scene's (offline): a few far returns make
+#: its box too large for a table (a 20 s scene spans 9M cells of 2 m), so no attempt.
+_DENSE_FIELDS_MAX_VALUES = 1 << 18
 _DENSE_FIELDS_CELLS_PER_VALUE = 256
 _DENSE_MAX_CELLS = 1 << 22
 _TABLES = threading.local()
@@ -248,12 +251,13 @@ def unique_voxel_keys(
     without packing every point's key and splitting it again (a frame's hot path)."""
     idx = voxel_indices(xyz, size)
     n = idx.shape[0]
-    if n >= _DENSE_FIELDS_MIN_VALUES:
+    limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
+    if _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES and _spanned_cells(idx, n) < limit:
         cols = [np.ascontiguousarray(idx[:, a]) for a in range(3)]
         los = [int(c.min()) for c in cols]
         spans = [int(c.max()) - lo + 1 for c, lo in zip(cols, los, strict=True)]
         cells = spans[0] * spans[1] * spans[2]
-        if cells < min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS):
+        if cells < limit:
             code = ((cols[0] - los[0]) * spans[1] + (cols[1] - los[1])) * spans[2] + (
                 cols[2] - los[2]
             )
@@ -269,6 +273,13 @@ def unique_voxel_keys(
     return (keys, *unique_ints(keys, return_inverse=True, return_counts=return_counts))
 
 
+def _spanned_cells(idx: np.ndarray, n: int) -> int:
+    """Cells of the bounding box of a sample of the (N, 3) voxel indices: a lower bound
+    of the whole box's, so a wide cloud is turned away after one cheap pass."""
+    sample = idx[:: max(1, n // _DENSE_FIELDS_MIN_VALUES)]
+    return int(np.prod(sample.max(axis=0) - sample.min(axis=0) + 1))
+
+
 def _dense_code(values: np.ndarray, n: int, fields: tuple[int, ...] | None):
     """(codes in 0..cells-1 ordered like ``values``, cells, codes -> values), or
     (None, 0, None) when no table small enough exists or ``values`` are not integers."""
@@ -279,7 +290,7 @@ def _dense_code(values: np.ndarray, n: int, fields: tuple[int, ...] | None):
     if hi - lo < min(_DENSE_CELLS_PER_VALUE * n + _DENSE_MIN_CELLS, _DENSE_MAX_CELLS):
         base = lo
         return v - base, hi - lo + 1, lambda c: c + base
-    if fields is None or lo < 0 or n < _DENSE_FIELDS_MIN_VALUES:
+    if fields is None or lo < 0 or not _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES:
         return None, 0, None
     limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
     shifts = np.cumsum((0,) + tuple(fields[::-1]))[:-1][::-1]
