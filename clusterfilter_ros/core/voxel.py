@@ -252,7 +252,7 @@ def unique_voxel_keys(
     idx = voxel_indices(xyz, size)
     n = idx.shape[0]
     limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
-    if _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES and _spanned_cells(idx, n) < limit:
+    if _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES:
         cols = [np.ascontiguousarray(idx[:, a]) for a in range(3)]
         los = [int(c.min()) for c in cols]
         spans = [int(c.max()) - lo + 1 for c, lo in zip(cols, los, strict=True)]
@@ -271,13 +271,6 @@ def unique_voxel_keys(
             return out
     keys = pack(idx)
     return (keys, *unique_ints(keys, return_inverse=True, return_counts=return_counts))
-
-
-def _spanned_cells(idx: np.ndarray, n: int) -> int:
-    """Cells of the bounding box of a sample of the (N, 3) voxel indices: a lower bound
-    of the whole box's, so a wide cloud is turned away after one cheap pass."""
-    sample = idx[:: max(1, n // _DENSE_FIELDS_MIN_VALUES)]
-    return int(np.prod(sample.max(axis=0) - sample.min(axis=0) + 1))
 
 
 def _dense_code(values: np.ndarray, n: int, fields: tuple[int, ...] | None):
