@@ -194,15 +194,18 @@ def _table_unique(code: np.ndarray, cells: int, ranks: bool) -> tuple[np.ndarray
     """(the distinct values of ``code`` (0..cells-1) in ascending order, each entry's rank
     among them as intp, or an empty array unless ``ranks``), from this thread's tables."""
     seen = getattr(_TABLES, "seen", None)
-    if seen is None or seen.size < cells:
-        size = min(max(cells, 2 * (0 if seen is None else seen.size)), _DENSE_MAX_CELLS)
+    # "dirty": a call interrupted (Ctrl-C, MemoryError) between marking and clearing left
+    # flags set; the next call then starts from a fresh table instead of trusting it.
+    if seen is None or seen.size < cells or getattr(_TABLES, "dirty", False):
+        old = 0 if seen is None else seen.size
+        size = min(max(cells, 2 * old if old < cells else old), _DENSE_MAX_CELLS)
         _TABLES.seen = seen = np.zeros(size, dtype=bool)
         _TABLES.rank = np.empty(size, dtype=np.int32)  # only cells in use are read
+    _TABLES.dirty = True
     seen[code] = True
-    try:
-        present = np.flatnonzero(seen[:cells])
-    finally:
-        seen[code] = False  # all False again for the next call, whatever happened
+    present = np.flatnonzero(seen[:cells])
+    seen[code] = False  # all False again for the next call
+    _TABLES.dirty = False
     if not ranks:
         return present, np.empty(0, dtype=np.intp)
     rank = _TABLES.rank

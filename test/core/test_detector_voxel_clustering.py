@@ -185,3 +185,12 @@ def test_unique_ints_tables_are_reused_cleanly_across_calls_and_threads():
     assert all(check(v) for v in inputs)  # a big table, then a small one, and again
     with ThreadPoolExecutor(4) as pool:
         assert all(pool.map(check, inputs * 4))
+
+
+def test_unique_ints_recovers_from_a_call_interrupted_mid_table():
+    values = np.random.default_rng(9).integers(0, 3000, 2000)
+    voxel.unique_ints(values)  # the thread's tables exist
+    voxel._TABLES.seen[:50] = True  # flags left set, as by a Ctrl-C between mark and clear
+    voxel._TABLES.dirty = True
+    assert np.array_equal(voxel.unique_ints(values), np.unique(values))
+    assert not voxel._TABLES.dirty and not voxel._TABLES.seen.any()
