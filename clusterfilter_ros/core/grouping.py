@@ -1,4 +1,4 @@
-"""Per-group reductions over point arrays."""
+"""Per-group reductions and orderings over point arrays."""
 
 from __future__ import annotations
 
