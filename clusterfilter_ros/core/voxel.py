@@ -325,6 +325,9 @@ def lookup(sorted_keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
     return np.where(sorted_keys[pos] == queries, pos, -1)
 
 
+#: Up to this many queries, the neighbourhood counts are looked up all at once.
+_FEW_QUERIES = 512
+
 #: Key differences of a voxel's 3x3x3 neighbourhood, itself first.
 _NEIGHBOURHOOD_KEYS = np.array(
     [0] + [s * offset_key(off) for off in HALF_OFFSETS for s in (1, -1)], dtype=np.int64
@@ -391,6 +394,10 @@ class SlidingVoxelCounts:
         total = np.zeros(queries.shape, np.int64)
         if self.keys.size == 0 or queries.size == 0:
             return total >= n
+        if queries.size <= _FEW_QUERIES:
+            # A few queries (a real Avia frame holds tens of returns): one lookup of all
+            # 27 neighbours each costs less than 27 lookups that rarely stop early.
+            return self.neighbourhood_counts(queries) >= n
         open_ = np.arange(queries.size)
         for off in _NEIGHBOURHOOD_KEYS:
             idx = lookup(self.keys, queries[open_] + off)
@@ -403,10 +410,9 @@ class SlidingVoxelCounts:
     def neighbourhood_counts(self, queries: np.ndarray) -> np.ndarray:
         """Points in the 3x3x3 voxel neighbourhood of each query key (itself included)."""
         queries = np.asarray(queries, dtype=np.int64)
-        total = np.zeros(queries.shape, np.int64)
         if self.keys.size == 0 or queries.size == 0:
-            return total
-        for off in _NEIGHBOURHOOD_KEYS:
-            idx = lookup(self.keys, queries + off)
-            total += np.where(idx >= 0, self.counts[np.maximum(idx, 0)], 0)
-        return total
+            return np.zeros(queries.shape, np.int64)
+        around = queries.reshape(-1, 1) + _NEIGHBOURHOOD_KEYS[None, :]  # one lookup for all
+        idx = lookup(self.keys, around.ravel()).reshape(around.shape)
+        found = np.where(idx >= 0, self.counts[np.maximum(idx, 0)], 0)
+        return found.sum(axis=1).reshape(queries.shape)

@@ -2,6 +2,7 @@
 window), which must equal a recount from scratch."""
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core import voxel
 
@@ -45,12 +46,14 @@ def test_incremental_window_matches_recount():
     assert len(window) == 11  # stamps 2.9 .. 3.9 (1 s window at 10 Hz)
 
 
-def test_neighbourhood_at_least_equals_the_count_threshold():
+@pytest.mark.parametrize("n_queries", [300, 5000])  # all at once, and one offset at a time
+def test_neighbourhood_at_least_equals_the_count_threshold(n_queries):
     rng = np.random.default_rng(4)
     window = voxel.SlidingVoxelCounts()
     for k in range(10):
         window.add(0.1 * k, voxel.voxel_keys(rng.normal(0.0, 2.0, size=(200, 3)), 1.0))
-    queries = np.unique(voxel.voxel_keys(rng.normal(0.0, 4.0, size=(300, 3)), 1.0))
+    queries = np.unique(voxel.voxel_keys(rng.normal(0.0, 8.0, size=(n_queries, 3)), 1.0))
+    assert (queries.size > voxel._FEW_QUERIES) == (n_queries > 1000)
     counts = window.neighbourhood_counts(queries)
     for n in (1, 3, 10, 50):
         assert np.array_equal(window.neighbourhood_at_least(queries, n), counts >= n)
