@@ -238,11 +238,10 @@ def unique_ints(
         return np.unique(values, return_inverse=return_inverse, return_counts=return_counts)
     present, inverse = _table_unique(code, cells, return_inverse or return_counts)
     out: list[np.ndarray] = [decode(present).astype(values.dtype, copy=False)]
-    if return_inverse or return_counts:
-        if return_inverse:
-            out.append(inverse)
-        if return_counts:
-            out.append(np.bincount(inverse, minlength=present.size))
+    if return_inverse:
+        out.append(inverse)
+    if return_counts:
+        out.append(np.bincount(inverse, minlength=present.size))
     return out[0] if len(out) == 1 else tuple(out)
 
 
@@ -256,18 +255,11 @@ def unique_voxel_keys(
     n = idx.shape[0]
     limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
     if _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES:
-        cols = [np.ascontiguousarray(idx[:, a]) for a in range(3)]
-        los = [int(c.min()) for c in cols]
-        spans = [int(c.max()) - lo + 1 for c, lo in zip(cols, los, strict=True)]
-        cells = spans[0] * spans[1] * spans[2]
-        if cells < limit:
-            code = ((cols[0] - los[0]) * spans[1] + (cols[1] - los[1])) * spans[2] + (
-                cols[2] - los[2]
-            )
+        radix = _radix_code([np.ascontiguousarray(idx[:, a]) for a in range(3)], limit)
+        if radix is not None:
+            code, cells, los, spans = radix
             present, inverse = _table_unique(code, cells, True)
-            yz, iz = np.divmod(present, spans[2])
-            ix, iy = np.divmod(yz, spans[1])
-            uk = pack(np.stack([ix + los[0], iy + los[1], iz + los[2]], axis=1))
+            uk = pack(np.stack(_radix_digits(present, los, spans), axis=1))
             out = (uk[inverse], uk, inverse)
             if return_counts:
                 out += (np.bincount(inverse, minlength=present.size),)
@@ -289,30 +281,49 @@ def _dense_code(values: np.ndarray, n: int, fields: tuple[int, ...] | None):
     if fields is None or lo < 0 or not _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES:
         return None, 0, None
     limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
-    shifts = np.cumsum((0,) + tuple(fields[::-1]))[:-1][::-1]
-    parts, los, spans = [], [], []
-    cells = 1
-    for width, shift in zip(fields, shifts, strict=True):
-        f = (v >> int(shift)) & ((1 << int(width)) - 1)
-        f_lo, f_hi = int(f.min()), int(f.max())
-        parts.append(f)
-        los.append(f_lo)
-        spans.append(f_hi - f_lo + 1)
-        cells *= f_hi - f_lo + 1
-        if cells >= limit:
-            return None, 0, None
-    code = parts[0] - los[0]
-    for f, f_lo, span in zip(parts[1:], los[1:], spans[1:], strict=True):
-        code = code * span + (f - f_lo)
+    shifts = [int(x) for x in np.cumsum((0,) + tuple(fields[::-1]))[:-1][::-1]]
+    parts = [(v >> shift) & ((1 << int(w)) - 1) for w, shift in zip(fields, shifts, strict=True)]
+    radix = _radix_code(parts, limit)
+    if radix is None:
+        return None, 0, None
+    code, cells, los, spans = radix
 
     def decode(c: np.ndarray) -> np.ndarray:
         key = np.zeros(c.shape, dtype=np.int64)
-        for f_lo, span, shift in zip(los[::-1], spans[::-1], shifts[::-1], strict=True):
-            key |= (c % span + f_lo) << int(shift)
-            c = c // span
+        for digit, shift in zip(_radix_digits(c, los, spans), shifts, strict=True):
+            key |= digit << shift
         return key
 
     return code, cells, decode
+
+
+def _radix_code(
+    parts: list[np.ndarray], limit: int
+) -> tuple[np.ndarray, int, list[int], list[int]] | None:
+    """Integer columns (the first most significant) as one mixed-radix code over their
+    own ranges, ordered as the columns are lexicographically: (code, cells, lows, spans),
+    or None when that box has ``limit`` cells or more."""
+    los, spans, cells = [], [], 1
+    for f in parts:
+        lo = int(f.min())
+        los.append(lo)
+        spans.append(int(f.max()) - lo + 1)
+        cells *= spans[-1]
+        if cells >= limit:
+            return None
+    code = parts[0] - los[0]
+    for f, lo, span in zip(parts[1:], los[1:], spans[1:], strict=True):
+        code = code * span + (f - lo)
+    return code, cells, los, spans
+
+
+def _radix_digits(code: np.ndarray, los: list[int], spans: list[int]) -> list[np.ndarray]:
+    """Inverse of :func:`_radix_code`: the columns of ``code``, the first most significant."""
+    digits = []
+    for lo, span in zip(los[::-1], spans[::-1], strict=True):
+        code, digit = np.divmod(code, span)
+        digits.append(digit + lo)
+    return digits[::-1]
 
 
 def lookup(sorted_keys: np.ndarray, queries: np.ndarray) -> np.ndarray:
