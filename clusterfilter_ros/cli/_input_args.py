@@ -8,8 +8,9 @@ from typing import Any
 from clusterfilter_ros.errors import InputError
 
 
-def add_input_options(parser: argparse.ArgumentParser) -> None:
-    """``--topic TOPIC=SENSOR`` (repeatable), ``--ground-truth-topic``, ``--sensors``."""
+def add_input_options(parser: argparse.ArgumentParser, ground_truth: bool = True) -> None:
+    """``--topic TOPIC=SENSOR`` (repeatable), ``--sensors`` and, with ``ground_truth``,
+    ``--ground-truth-topic``."""
     group = parser.add_argument_group("input selection")
     group.add_argument(
         "--topic",
@@ -19,12 +20,13 @@ def add_input_options(parser: argparse.ArgumentParser) -> None:
         help="bags: read lidar TOPIC as SENSOR (avia or mid360); repeatable. Default: every "
         "PointCloud2/CustomMsg topic whose name contains 'avia' or 'mid360'/'360'",
     )
-    group.add_argument(
-        "--ground-truth-topic",
-        metavar="TOPIC",
-        help="bags: PointStamped/PoseStamped ground-truth topic (default: /uav/ground_truth "
-        "if present)",
-    )
+    if ground_truth:
+        group.add_argument(
+            "--ground-truth-topic",
+            metavar="TOPIC",
+            help="bags: PointStamped/PoseStamped ground-truth topic (default: "
+            "/uav/ground_truth if present)",
+        )
     group.add_argument(
         "--sensors",
         metavar="NAMES",

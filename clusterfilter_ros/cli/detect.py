@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from clusterfilter_ros.cli._detector_args import add_detector_options, detector_params_from_args
+from clusterfilter_ros.cli._input_args import add_input_options, input_kwargs_from_args
 
 #: The detector does not tell drone models apart; the UG2+ Classification column says so.
 UG2_CLASSIFICATION = "unknown"
@@ -47,6 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "many seconds away (default 0.3)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_input_options(p, ground_truth=False)
     add_detector_options(p)
     p.set_defaults(func=run)
 
@@ -99,15 +101,26 @@ def read_timestamps(path: str) -> dict:
     return {k: np.asarray(v, dtype=np.float64) for k, v in out.items()}
 
 
-def detect_one(input_path: Path, mode: str, params, stamps, max_gap: float, progress: bool):
-    """Estimates (TimedPositions with confidence/points) for one recording."""
+def detect_one(
+    input_path: Path,
+    mode: str,
+    params,
+    stamps,
+    max_gap: float,
+    progress: bool,
+    select: dict | None = None,
+):
+    """Estimates (TimedPositions with confidence/points) for one recording.
+
+    ``select``: ``topics`` / ``sensors`` for :func:`iter_input_frames`.
+    """
     import numpy as np
 
     from clusterfilter_ros.core.evaluation import interpolate_predictions
     from clusterfilter_ros.core.frame import TimedPositions
     from clusterfilter_ros.io.dataset import iter_input_frames, require_frames
 
-    frames = require_frames(iter_input_frames(input_path), input_path)
+    frames = require_frames(iter_input_frames(input_path, **(select or {})), input_path)
     if progress:
         from tqdm import tqdm
 
@@ -158,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
             "clustering=dbscan is offline only; use --mode offline or clustering=voxel"
         )
     inputs = list_inputs(args.input)
+    select = input_kwargs_from_args(args)
     stamps_by_seq = read_timestamps(args.timestamps) if args.timestamps else None
     progress = not args.quiet
     if args.format == "csv":
@@ -167,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
                 "(pass one of them, or use --format ug2)"
             )
         stamps = _stamps_for(stamps_by_seq, inputs[0])
-        est = detect_one(inputs[0], args.mode, params, stamps, args.max_gap, progress)
+        est = detect_one(inputs[0], args.mode, params, stamps, args.max_gap, progress, select)
         write_positions_csv(args.output, est)
         print(f"{len(est)} estimates -> {args.output}", file=sys.stderr)
         return 0
@@ -175,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     total = 0
     for path in inputs:
         stamps = _stamps_for(stamps_by_seq, path)
-        est = detect_one(path, args.mode, params, stamps, args.max_gap, progress)
+        est = detect_one(path, args.mode, params, stamps, args.max_gap, progress, select)
         name = _sequence_name(path)
         for t, p in zip(est.stamps, est.xyz, strict=True):
             x, y, z = (float(v) for v in p)

@@ -123,6 +123,10 @@ CASES = [
     ("detect-param-out-of-range", "detect {R}/seq -o {T}/o.csv --param eps=-1", "'eps'"),
     ("detect-param-unknown", "detect {R}/seq -o {T}/o.csv --param nope=1", "'nope'"),
     ("detect-param-nan", "detect {R}/seq -o {T}/o.csv --param eps=nan", "'eps'"),
+    ("detect-unknown-topic", "detect {R}/bag2 -o {T}/o.csv --topic /nope=avia", "/nope"),
+    ("detect-bad-topic-syntax", "detect {R}/b1.bag -o {T}/o.csv --topic nope", "nope"),
+    ("detect-topic-on-folder", "detect {R}/seq -o {T}/o.csv --topic /a=avia", "{R}/seq"),
+    ("detect-unknown-sensor", "detect {R}/seq -o {T}/o.csv --sensors lidarX", "lidarX"),
     # evaluate
     ("evaluate-missing-pred", "evaluate {R}/nope.csv {R}/seq", "{R}/nope.csv"),
     ("evaluate-pred-header", "evaluate {R}/wrong_header.csv {R}/seq", "{R}/wrong_header.csv"),
@@ -137,6 +141,13 @@ CASES = [
     ("evaluate-plot-into-folder", "evaluate {R}/pred.csv {R}/seq --plot {T}", "cannot write {T}"),
     ("evaluate-max-gap-nan", "evaluate {R}/pred.csv {R}/seq --max-gap nan", "--max-gap"),
     ("evaluate-hit-radius-neg", "evaluate {R}/pred.csv {R}/seq --hit-radius -1", "--hit-radius"),
+    ("evaluate-unknown-gt-topic", "evaluate {R}/pred.csv {R}/bag2 --ground-truth-topic /gt", "/gt"),
+    ("evaluate-truncated-gt-bag", "evaluate {R}/pred.csv {R}/b1t.bag", "{R}/b1t.bag"),
+    (
+        "evaluate-gt-topic-not-bag",
+        "evaluate {R}/pred.csv {R}/seq --ground-truth-topic /gt",
+        "--ground-truth-topic",
+    ),
     # convert
     ("convert-missing-input", "convert {R}/nope {T}/out --to mmaud", "{R}/nope"),
     ("convert-output-exists", "convert {R}/seq {R}/bag2 --to mmaud", "{R}/bag2"),

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from clusterfilter_ros.cli import main
-from clusterfilter_ros.core.frame import Sequence, TimedPositions
+from clusterfilter_ros.core.frame import AVIA, MID360, Sequence, TimedPositions
 from clusterfilter_ros.io.dataset import write_output
 from clusterfilter_ros.io.groundtruth import read_positions_csv
 
@@ -29,8 +29,11 @@ def recordings(tmp_path_factory):
     seq = Sequence("flight", frames, gt)
     write_output(seq, root / "mmaud" / "flight", fmt="mmaud")
     write_output(seq, root / "bag2", fmt="rosbag2")
+    renamed = {AVIA: "/up/points", MID360: "/around/points"}
+    write_output(seq, root / "renamed.bag", fmt="rosbag1", topics=renamed, ground_truth_topic="/gt")
     quiet, _, _ = scenes.build_scene(duration=6.0, drone=False, seed=5, wall_points=200)
     write_output(Sequence("empty", quiet, None), root / "mmaud" / "empty", fmt="mmaud")
+    write_output(Sequence("empty", quiet, None), root / "empty_bag", fmt="rosbag2")
     return root
 
 
@@ -97,3 +100,52 @@ def test_drone_free_evaluation_and_user_errors(recordings, tmp_path, capsys):
     assert main(["detect", str(tmp_path / "missing"), "-o", str(out)]) == 2
     assert main(["detect", str(recordings / "mmaud"), "-o", str(out)]) == 2  # csv needs one
     assert main(["evaluate", str(tmp_path / "missing.csv"), str(seq)]) == 2
+
+
+def _evaluate_json(capsys, *argv: str) -> dict:
+    capsys.readouterr()
+    assert main(["evaluate", *argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_bag_with_its_own_topic_names(recordings, tmp_path, capsys):
+    """--topic maps a bag's lidar topics; evaluate reads the bag's ground-truth topic."""
+    bag = recordings / "renamed.bag"
+    out = tmp_path / "pred.csv"
+    assert main(["detect", str(bag), "-o", str(out), "--quiet"]) == 2
+    assert "/up/points" in capsys.readouterr().err  # the error lists the bag's topics
+    topics = ["--topic", "/up/points=avia", "--topic", "/around/points=mid360"]
+    assert main(["detect", str(bag), "-o", str(out), "--quiet", *topics]) == 0
+    reference = tmp_path / "reference.csv"
+    assert main(["detect", str(recordings / "bag2"), "-o", str(reference), "--quiet"]) == 0
+    assert out.read_text() == reference.read_text()
+
+    from_bag = _evaluate_json(capsys, str(out), str(bag), "--ground-truth-topic", "/gt")
+    from_folder = _evaluate_json(capsys, str(out), str(recordings / "mmaud" / "flight"))
+    assert from_bag == pytest.approx(from_folder, rel=1e-6)
+    assert from_bag["detection_rate"] > 0.9
+    # The default topic is absent from this bag: no ground truth, so every row is a false alarm.
+    drone_free = _evaluate_json(capsys, str(out), str(bag))
+    assert drone_free["false_alarm_fraction"] > 0.5
+
+
+def test_sensors_option_reads_one_lidar(recordings, tmp_path):
+    both, avia = tmp_path / "both.csv", tmp_path / "avia.csv"
+    flight = str(recordings / "mmaud" / "flight")
+    assert main(["detect", flight, "-o", str(both), "--quiet"]) == 0
+    assert main(["detect", flight, "-o", str(avia), "--quiet", "--sensors", "avia"]) == 0
+    assert len(read_positions_csv(avia)) > 50  # the drone is in both lidars' frames
+    assert out_points(avia) < out_points(both)
+
+
+def out_points(path: Path) -> int:
+    """Supporting points summed over a CSV's rows."""
+    return int(read_positions_csv(path).extra["points"].sum())
+
+
+def test_drone_free_bag_counts_every_report(recordings, tmp_path, capsys):
+    pred = tmp_path / "pred.csv"
+    pred.write_text("timestamp,x,y,z\n1001.0,1,2,3\n1001.1,1,2,3\n")
+    metrics = _evaluate_json(capsys, str(pred), str(recordings / "empty_bag"))
+    assert metrics["false_alarm_seconds"] > 0
+    assert metrics["duration"] == pytest.approx(6.0, abs=0.3)
