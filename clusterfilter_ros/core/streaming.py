@@ -18,9 +18,10 @@ the best candidate becomes the track; returns the previous track had gathered si
 carried over, and the history after the track's newest sample is caught up. Between
 re-clusterings, new points within ``track_gate`` metres of the predicted position extend
 the track, up to ``max_gap`` seconds after its newest sample. The estimate for a frame is
-a weighted straight-line fit (a quadratic for a well-sampled, fresh track) over the
-track's last ``track_window`` seconds (at least its last three samples) at the frame
-stamp, reported while the newest sample is at most ``max_extrapolation`` old
+a weighted straight-line fit (a quadratic for a well-sampled moving track, continued along
+its tangent past the newest sample) over the track's last ``track_window`` seconds (at
+least its last three samples) up to the end of the frame's scan, evaluated at the frame
+stamp, and reported while the newest sample is at most ``max_extrapolation`` old
 (``max_gap`` for a track slower than ``min_speed``).
 """
 
@@ -472,8 +473,12 @@ class StreamingDetector:
         """Position at ``stamp`` from the track's last track_window seconds of samples
         (ending at its newest sample). The newest sample may be at most
         ``max_extrapolation`` old, or ``max_gap`` for a track slower than ``min_speed``
-        (a hovering drone seen once a second is where it was)."""
-        pred = self._predict(stamp)
+        (a hovering drone seen once a second is where it was).
+
+        ``stamp`` is a frame's stamp, the start of its scan: the frame's own returns,
+        scanned over the next ``frame_period``, are part of its estimate (deviation 56).
+        """
+        pred = self._predict(stamp, until=stamp + self.params.frame_period)
         if pred is None:
             return None
         position, n, age, velocity = pred
@@ -482,14 +487,20 @@ class StreamingDetector:
         limit = max(p.max_extrapolation, p.max_gap) if speed < p.min_speed else p.max_extrapolation
         return (position, n) if age <= limit else None
 
-    def _predict(self, stamp: float) -> tuple[np.ndarray, int, float, np.ndarray] | None:
+    def _predict(
+        self, stamp: float, until: float | None = None
+    ) -> tuple[np.ndarray, int, float, np.ndarray] | None:
         """(position, points, age of the newest sample, velocity) at ``stamp`` from a weighted
-        fit over the track's last track_window seconds of samples (at least the last
-        three), or None without a sample at or before ``stamp``. The fit is a straight
-        line, or a quadratic when at least 6 samples span 0.6 s, the newest is at most two
-        frame periods old and the fitted acceleration is at most ``max_accel``."""
+        fit over the samples up to ``until`` (default ``stamp``): the last track_window
+        seconds of them (at least the last three), or None without such a sample. The
+        age is negative when the newest sample is after ``stamp``. The fit is a straight
+        line or, for a track at least ``min_speed`` fast, a quadratic when at least 6
+        samples span 0.6 s, the newest is at most ``max_extrapolation`` old and the fitted
+        acceleration is at most ``max_accel``; past its newest sample the quadratic is
+        continued along its tangent there (deviation 56)."""
         p = self.params
-        newest = [s.t for s in self._track if s.t <= stamp]
+        cutoff = stamp if until is None else until
+        newest = [s.t for s in self._track if s.t <= cutoff]
         if not newest:
             return None
         last = max(newest)
@@ -507,16 +518,22 @@ class StreamingDetector:
         if ts[-1] - ts[0] < 2 * p.frame_period:
             slope = np.zeros(3)  # too short a span for a velocity
         age = stamp - last
-        if ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= 2 * p.frame_period:
-            # A well-sampled, fresh track: a quadratic follows a turn or a change of speed
-            # without the straight line's lag, unless its acceleration is implausible.
+        moving = float(np.linalg.norm(slope)) >= p.min_speed
+        if moving and ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= p.max_extrapolation:
+            # A well-sampled, fresh, moving track: a quadratic follows a turn or a change
+            # of speed without the straight line's lag, unless its acceleration is
+            # implausible. Beyond the newest sample it goes on along its tangent: the
+            # curvature of a second of noisy samples is not extrapolated.
             dt = ts - tc
             sw = np.sqrt(ws)[:, None]
             design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1) * sw
             coef = np.linalg.lstsq(design, ps * sw, rcond=None)[0]
             if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
                 x = stamp - tc
-                return coef[0] + coef[1] * x + coef[2] * x * x, n, age, slope
+                x_last = min(x, ts[-1] - tc)
+                at_last = coef[0] + coef[1] * x_last + coef[2] * x_last * x_last
+                tangent = coef[1] + 2.0 * coef[2] * x_last
+                return at_last + tangent * (x - x_last), n, age, slope
         return mean + slope * (stamp - tc), n, age, slope
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:

@@ -180,6 +180,39 @@ def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     assert _tracked(times, hover)._fit(times[-1] + 1.5) is None  # beyond max_gap
 
 
+def test_the_estimate_for_a_frame_uses_the_returns_of_its_own_scan():
+    # A drone at 8 m/s brakes hard during the scan of the frame stamped 1.0: that frame's
+    # returns (scanned 1.0-1.1 s) lie 0.6 m behind the straight line. The estimate for
+    # the frame follows them; a return of the next frame's scan (after 1.1 s) is not
+    # used for it.
+    times = np.arange(0.0, 1.0, 0.1)
+    path = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
+    line = np.array([10.0 + 8.0 * 1.0, 5.0, 20.0])
+    before = _tracked(times, path)._fit(1.0)[0]
+    assert np.linalg.norm(before - line) < 0.05
+    own = (10.0 + 8.0 * 1.06 - 0.6, 5.0, 20.0)
+    with_own = _tracked([*times, 1.06], [*path, own])._fit(1.0)[0]
+    assert line[0] - with_own[0] > 0.2
+    later = (10.0 + 8.0 * 1.16 - 3.0, 5.0, 20.0)
+    with_later = _tracked([*times, 1.06, 1.16], [*path, own, later])._fit(1.0)[0]
+    np.testing.assert_array_equal(with_later, with_own)
+
+
+def test_past_its_newest_sample_an_accelerating_track_follows_its_tangent():
+    # x = 10 + 4 t + 1.5 t^2 (3 m/s^2) sampled every 0.1 s up to 1.0 s; 0.4 s later the
+    # estimate continues the curve's tangent at 1.0 s (7 m/s), neither the parabola
+    # (0.24 m further) nor the mean velocity of the last second (5.5 m/s).
+    times = np.arange(0.0, 1.01, 0.1)
+    path = [(10.0 + 4.0 * t + 1.5 * t * t, 5.0, 20.0) for t in times]
+    pos, _ = _tracked(times, path)._fit(1.4)
+    tangent = 10.0 + 4.0 + 1.5 + 7.0 * 0.4
+    assert pos[0] == pytest.approx(tangent, abs=0.02)
+    # A hovering drone's jitter is not extrapolated as a curve: a straight line.
+    jitter = [(10.0 + 0.05 * (-1) ** i, 5.0, 20.0) for i in range(len(times))]
+    pos, _ = _tracked(times, jitter)._fit(1.4)
+    assert abs(pos[0] - 10.0) < 0.06
+
+
 def _restamped(frame: Frame, stamp: float) -> Frame:
     return Frame(stamp, frame.sensor, frame.xyz, frame.intensity, frame.point_time)
 
