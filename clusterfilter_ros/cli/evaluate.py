@@ -43,9 +43,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-_BAG_GLOBS = ("*.db3", "*.mcap")
-
-
 def load_truth(path: str, ground_truth_topic: str | None = None):
     """(ground truth TimedPositions, duration or None) from a CSV/folder/sequence/bag.
 
@@ -61,18 +58,15 @@ def load_truth(path: str, ground_truth_topic: str | None = None):
         is_sequence_folder,
         list_lidar_files,
     )
+    from clusterfilter_ros.io.dataset import is_bag, read_input_ground_truth
     from clusterfilter_ros.io.groundtruth import read_ground_truth
 
     p = Path(path)
-    if p.is_dir():
-        is_bag = (p / "metadata.yaml").is_file() or any(any(p.glob(g)) for g in _BAG_GLOBS)
-    else:
-        is_bag = p.suffix.lower() in (".bag", ".db3", ".mcap")
-    if ground_truth_topic and not is_bag:
+    bag = is_bag(p)
+    if ground_truth_topic and not bag:
         raise InputError(f"{p}: --ground-truth-topic applies to bags only")
-    if is_bag:
+    if bag:
         from clusterfilter_ros.io.bags import bag_summary
-        from clusterfilter_ros.io.dataset import read_input_ground_truth
 
         gt = read_input_ground_truth(p, ground_truth_topic)
         summary = bag_summary(p)

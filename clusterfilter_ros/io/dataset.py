@@ -28,24 +28,28 @@ INPUT_KINDS = ("mmaud", "mmaud-root", "rosbag1", "rosbag2")
 OUTPUT_FORMATS = ("mmaud", "rosbag2", "rosbag1")
 
 
+def is_bag(path: str | os.PathLike[str]) -> bool:
+    """True if ``path`` is a ROS 1 ``.bag``, a bare ``.db3``/``.mcap`` or a ROS 2 bag folder."""
+    p = Path(path)
+    if p.is_dir():
+        return (p / "metadata.yaml").is_file() or any(p.glob("*.db3")) or any(p.glob("*.mcap"))
+    return p.is_file() and p.suffix.lower() in (".bag", ".db3", ".mcap")
+
+
 def detect_input_kind(path: str | os.PathLike[str]) -> str:
     """Which of :data:`INPUT_KINDS` ``path`` is; :class:`InputError` if none."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file or folder")
+    if is_bag(p):
+        return "rosbag1" if p.is_file() and p.suffix.lower() == ".bag" else "rosbag2"
     if p.is_file():
         suffix = p.suffix.lower()
-        if suffix == ".bag":
-            return "rosbag1"
-        if suffix in (".db3", ".mcap"):
-            return "rosbag2"
         if suffix == ".npy":
             raise InputError(
                 f"{p}: a single .npy file; pass its sequence folder (the one holding lidar_360/)"
             )
         raise InputError(f"{p}: unknown input file type (expected .bag, .db3, .mcap or a folder)")
-    if (p / "metadata.yaml").is_file() or any(p.glob("*.db3")) or any(p.glob("*.mcap")):
-        return "rosbag2"
     if challenge.is_sequence_folder(p):
         return "mmaud"
     try:
