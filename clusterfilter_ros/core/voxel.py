@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -255,7 +256,7 @@ def unique_voxel_keys(
     n = idx.shape[0]
     limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
     if _DENSE_FIELDS_MIN_VALUES <= n <= _DENSE_FIELDS_MAX_VALUES:
-        radix = _radix_code([np.ascontiguousarray(idx[:, a]) for a in range(3)], limit)
+        radix = _radix_code((np.ascontiguousarray(idx[:, a]) for a in range(3)), limit)
         if radix is not None:
             code, cells, los, spans = radix
             present, inverse = _table_unique(code, cells, True)
@@ -282,7 +283,7 @@ def _dense_code(values: np.ndarray, n: int, fields: tuple[int, ...] | None):
         return None, 0, None
     limit = min(_DENSE_FIELDS_CELLS_PER_VALUE * n, _DENSE_MAX_CELLS)
     shifts = [int(x) for x in np.cumsum((0,) + tuple(fields[::-1]))[:-1][::-1]]
-    parts = [(v >> shift) & ((1 << int(w)) - 1) for w, shift in zip(fields, shifts, strict=True)]
+    parts = ((v >> shift) & ((1 << int(w)) - 1) for w, shift in zip(fields, shifts, strict=True))
     radix = _radix_code(parts, limit)
     if radix is None:
         return None, 0, None
@@ -298,21 +299,24 @@ def _dense_code(values: np.ndarray, n: int, fields: tuple[int, ...] | None):
 
 
 def _radix_code(
-    parts: list[np.ndarray], limit: int
+    parts: Iterable[np.ndarray], limit: int
 ) -> tuple[np.ndarray, int, list[int], list[int]] | None:
     """Integer columns (the first most significant) as one mixed-radix code over their
     own ranges, ordered as the columns are lexicographically: (code, cells, lows, spans),
-    or None when that box has ``limit`` cells or more."""
+    or None when that box has ``limit`` cells or more. ``parts`` may be a generator: no
+    column is made after the one that overflows the box."""
+    cols: list[np.ndarray] = []
     los, spans, cells = [], [], 1
     for f in parts:
+        cols.append(f)
         lo = int(f.min())
         los.append(lo)
         spans.append(int(f.max()) - lo + 1)
         cells *= spans[-1]
         if cells >= limit:
             return None
-    code = parts[0] - los[0]
-    for f, lo, span in zip(parts[1:], los[1:], spans[1:], strict=True):
+    code = cols[0] - los[0]
+    for f, lo, span in zip(cols[1:], los[1:], spans[1:], strict=True):
         code = code * span + (f - lo)
     return code, cells, los, spans
 
