@@ -256,7 +256,7 @@ def test_silent_lidar_warn_then_stale_and_detection_continues(make_rig, small_se
     stops too it says STALE."""
     from diagnostic_msgs.msg import DiagnosticStatus
 
-    rig = make_rig(qos_depth=1000, sync_timeout=0.1, stale_timeout=0.5)
+    rig = make_rig(qos_depth=1000, max_queue=1000, sync_timeout=0.1, stale_timeout=0.5)
     frames = small_sequence.frames
     cut = frames[len(frames) // 2].stamp
     assert rig.replayer.wait_for_subscribers(10.0, ["/uav/pose"], settle=0.3)
