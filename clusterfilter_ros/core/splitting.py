@@ -23,7 +23,10 @@ way a tracker would:
 Only flying clusters are split (centroid above ``min_centroid_z``), and, when the static
 structure is known, only those with at most :data:`MAX_CONTACT` of their points in or
 next to its voxels: what suppression leaves of walls and crowns is often wide, and
-splitting it costs time and finds nothing.
+splitting it costs time and finds nothing. A cluster that moves (motion coherence at
+least :data:`MOVING_COHERENCE`) is split whatever its contact: birds circling over one
+spot for a while fill voxels often enough to be suppressed as structure, and the rest of
+their returns, and a drone's merged with them, then lie next to "structure" of their own.
 
 The loop runs over frame samples of the few clusters that are split, never over points.
 """
@@ -49,6 +52,10 @@ _SAME_SAMPLE_OFFSETS = np.array(
 _UNREACHABLE = 1e6
 #: Largest share of a cluster's points in or next to static structure for it to be split.
 MAX_CONTACT = 0.1
+#: Motion coherence from which a cluster is split whatever its contact with structure.
+#: Remnants of walls and crowns mostly measure 0-0.1 (a few 0.3-0.46 in the streaming
+#: history); a drone merged with birds circling it 0.55-0.65 (docs/detector.md, dev. 57).
+MOVING_COHERENCE = 0.4
 #: Seconds per centroid in :func:`still_run`: several sweeps of a sparse drone's returns.
 STILL_STEP = 0.5
 
@@ -213,9 +220,9 @@ def split_merged(
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
-    left whole: what static suppression left of a wall or a tree, not objects in the
-    air. Returns (compact labels, K, (N,) bool mask of the points that were in a split
-    cluster).
+    left whole unless its motion coherence is at least ``MOVING_COHERENCE``: what static
+    suppression left of a wall or a tree, not objects in the air. Returns (compact labels,
+    K, (N,) bool mask of the points that were in a split cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
     split = merged_clusters(scores, params, min_extent)
@@ -227,7 +234,8 @@ def split_merged(
         contact = structure_contact(
             labels[member], xyz[member], k, which, structure_keys, float(params.static_voxel)
         )
-        split = split[contact[split] <= MAX_CONTACT]
+        moving = scores.coherence[split] >= MOVING_COHERENCE
+        split = split[(contact[split] <= MAX_CONTACT) | moving]
     if split.size == 0:
         return labels, k, np.zeros(labels.size, dtype=bool)
     out = labels.copy()
