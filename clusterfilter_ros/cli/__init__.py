@@ -57,9 +57,21 @@ def build_parser() -> argparse.ArgumentParser:
 SIGTERM_AS_INTERRUPT = frozenset({"detect", "evaluate", "convert", "info", "simulate"})
 
 
+#: Set when SIGTERM arrived: the KeyboardInterrupt it raises can be caught inside a
+#: library call and come out as another error (numpy's ``tofile`` turns it into a
+#: TypeError), which is still an interruption, not a failure.
+_SIGTERM_RECEIVED = threading.Event()
+
+
 def _terminate(signum: int, frame: object) -> None:
     """SIGTERM unwinds like Ctrl-C, so partial outputs are removed on the way out."""
+    _SIGTERM_RECEIVED.set()
     raise KeyboardInterrupt
+
+
+def _interrupted(command: str) -> int:
+    print(f"clusterfilter {command}: interrupted", file=sys.stderr)
+    return 130
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -74,16 +86,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
     ):
         signal.signal(signal.SIGTERM, _terminate)
+    _SIGTERM_RECEIVED.clear()
     try:
         return int(args.func(args) or 0)
-    except ClusterfilterError as exc:
-        if args.debug:
+    except KeyboardInterrupt:
+        return _interrupted(args.command)
+    except Exception as exc:
+        if _SIGTERM_RECEIVED.is_set():
+            return _interrupted(args.command)
+        if not isinstance(exc, ClusterfilterError) or args.debug:
             raise
         print(f"clusterfilter {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"clusterfilter {args.command}: interrupted", file=sys.stderr)
-        return 130
 
 
 if __name__ == "__main__":

@@ -375,3 +375,33 @@ def test_killed_writer_leaves_no_partial_output(tmp_path: Path, sig: signal.Sign
     else:
         assert proc.returncode == -signal.SIGKILL
         assert all(name.startswith(".sim.") and name.endswith(".tmp") for name in leftovers)
+
+
+def test_sigterm_caught_inside_a_library_call_is_still_an_interruption(monkeypatch, capsys):
+    """SIGTERM raises KeyboardInterrupt wherever the main thread is; numpy's ``tofile``
+    catches it and raises a TypeError instead (seen once in the killed-writer test on
+    CPython 3.12). The command still reports an interruption (130), without a traceback."""
+    from clusterfilter_ros.cli import info
+
+    def run_swallowing_the_interrupt(args):
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5.0)  # the handler raises here
+        except KeyboardInterrupt:
+            pass
+        raise TypeError("expected str, bytes or os.PathLike object, not BufferedWriter")
+
+    def run_failing(args):
+        raise TypeError("bug")
+
+    previous = signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:
+        monkeypatch.setattr(info, "run", run_swallowing_the_interrupt)
+        assert main(["info", "anything"]) == 130
+        assert capsys.readouterr().err.strip() == "clusterfilter info: interrupted"
+        # Without SIGTERM the same error is a bug and propagates.
+        monkeypatch.setattr(info, "run", run_failing)
+        with pytest.raises(TypeError):
+            main(["info", "anything"])
+    finally:
+        signal.signal(signal.SIGTERM, previous)
