@@ -1,0 +1,62 @@
+"""The error split tells a trailing estimator (lag) from a scattering one (no lag)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+_DIR = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+def _load():
+    sys.path.insert(0, str(_DIR))
+    spec = importlib.util.spec_from_file_location("error_components", _DIR / "error_components.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _straight_flight():
+    t = np.arange(0.0, 10.0, 0.01)
+    xyz = np.stack([3.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], 1)  # 3 m/s along x
+    return t, xyz
+
+
+def test_an_estimate_from_0_2_s_ago_shows_a_lag_of_0_2_s():
+    ec = _load()
+    t, xyz = _straight_flight()
+    stamps = np.arange(1.0, 9.0, 0.1)
+    late = np.stack([3.0 * (stamps - 0.2), np.zeros_like(stamps), np.full_like(stamps, 20.0)], 1)
+    c = ec.error_components(stamps, late, t, xyz)
+    assert c["hits"] == stamps.size and c["moving"] == stamps.size
+    assert c["lag"] == pytest.approx(-0.2, abs=1e-6)
+    assert c["along_mean"] == pytest.approx(-0.6, abs=1e-6)
+    assert c["along_sd"] == pytest.approx(0.0, abs=1e-6)
+    assert c["cross_rms"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_scatter_across_the_path_is_not_lag_and_misses_stay_out():
+    ec = _load()
+    t, xyz = _straight_flight()
+    stamps = np.arange(1.0, 9.0, 0.1)
+    est = np.stack([3.0 * stamps, np.zeros_like(stamps), np.full_like(stamps, 20.0)], 1)
+    est[::2, 1] += 0.3
+    est[1::2, 1] -= 0.3
+    est[5] += [0.0, 50.0, 0.0]  # another object: not a hit, not in the split
+    c = ec.error_components(stamps, est, t, xyz)
+    assert c["hits"] == stamps.size - 1
+    assert c["lag"] == pytest.approx(0.0, abs=1e-6)
+    assert c["cross_rms"] == pytest.approx(0.3, abs=1e-6)
+    assert c["rmse"] == pytest.approx(0.3, abs=1e-6)
+
+
+def test_no_estimates_give_counts_of_zero_and_nan_statistics():
+    ec = _load()
+    t, xyz = _straight_flight()
+    c = ec.error_components(np.empty(0), np.empty((0, 3)), t, xyz)
+    assert c["n"] == 0 and c["hits"] == 0
+    assert np.isnan(c["rmse"]) and np.isnan(c["lag"])
