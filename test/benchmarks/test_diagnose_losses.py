@@ -2,24 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
-import sys
-from pathlib import Path
-
-_DIR = Path(__file__).resolve().parents[2] / "benchmarks"
 
 
-def _load():
-    sys.path.insert(0, str(_DIR))
-    spec = importlib.util.spec_from_file_location("diagnose_losses", _DIR / "diagnose_losses.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_every_observable_sample_is_hit_or_has_a_reason(tmp_path, capsys):
-    diagnose = _load()
+def test_every_observable_sample_is_hit_or_has_a_reason(tmp_path, capsys, benchmark_module):
+    diagnose = benchmark_module("diagnose_losses")
     assert (
         diagnose.main(
             [
@@ -48,8 +35,8 @@ def test_every_observable_sample_is_hit_or_has_a_reason(tmp_path, capsys):
     assert raw >= usable >= denoised >= kept
 
 
-def test_stream_mode_accounts_for_every_observable_sample(tmp_path, capsys):
-    diagnose = _load()
+def test_stream_mode_accounts_for_every_observable_sample(tmp_path, capsys, benchmark_module):
+    diagnose = benchmark_module("diagnose_losses")
     argv = ["--mode", "stream", "--scenarios", "default", "--seeds", "0", "--duration", "8"]
     assert diagnose.main(argv + ["--cache", str(tmp_path)]) == 0
     out = capsys.readouterr().out

@@ -2,22 +2,8 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-_DIR = Path(__file__).resolve().parents[2] / "benchmarks"
-
-
-def _load():
-    sys.path.insert(0, str(_DIR))
-    spec = importlib.util.spec_from_file_location("error_components", _DIR / "error_components.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _straight_flight():
@@ -26,8 +12,8 @@ def _straight_flight():
     return t, xyz
 
 
-def test_an_estimate_from_0_2_s_ago_shows_a_lag_of_0_2_s():
-    ec = _load()
+def test_an_estimate_from_0_2_s_ago_shows_a_lag_of_0_2_s(benchmark_module):
+    ec = benchmark_module("error_components")
     t, xyz = _straight_flight()
     stamps = np.arange(1.0, 9.0, 0.1)
     late = np.stack([3.0 * (stamps - 0.2), np.zeros_like(stamps), np.full_like(stamps, 20.0)], 1)
@@ -39,8 +25,8 @@ def test_an_estimate_from_0_2_s_ago_shows_a_lag_of_0_2_s():
     assert c["cross_rms"] == pytest.approx(0.0, abs=1e-6)
 
 
-def test_scatter_across_the_path_is_not_lag_and_misses_stay_out():
-    ec = _load()
+def test_scatter_across_the_path_is_not_lag_and_misses_stay_out(benchmark_module):
+    ec = benchmark_module("error_components")
     t, xyz = _straight_flight()
     stamps = np.arange(1.0, 9.0, 0.1)
     est = np.stack([3.0 * stamps, np.zeros_like(stamps), np.full_like(stamps, 20.0)], 1)
@@ -54,8 +40,8 @@ def test_scatter_across_the_path_is_not_lag_and_misses_stay_out():
     assert c["rmse"] == pytest.approx(0.3, abs=1e-6)
 
 
-def test_no_estimates_give_counts_of_zero_and_nan_statistics():
-    ec = _load()
+def test_no_estimates_give_counts_of_zero_and_nan_statistics(benchmark_module):
+    ec = benchmark_module("error_components")
     t, xyz = _straight_flight()
     c = ec.error_components(np.empty(0), np.empty((0, 3)), t, xyz)
     assert c["n"] == 0 and c["hits"] == 0
