@@ -2,19 +2,9 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
-
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "reference_paper.py"
-_spec = importlib.util.spec_from_file_location("reference_paper", _PATH)
-reference_paper = importlib.util.module_from_spec(_spec)
-sys.modules.setdefault("reference_paper", reference_paper)
-_spec.loader.exec_module(reference_paper)
 
 
 def _scene(n_frames: int = 60, seed: int = 0) -> tuple[list[Frame], np.ndarray]:
@@ -40,7 +30,8 @@ def _scene(n_frames: int = 60, seed: int = 0) -> tuple[list[Frame], np.ndarray]:
     return frames, (stamps, np.array(truth))
 
 
-def test_reference_selects_the_moving_blob() -> None:
+def test_reference_selects_the_moving_blob(benchmark_module) -> None:
+    reference_paper = benchmark_module("reference_paper")
     frames, (stamps, truth) = _scene()
     result = reference_paper.reference_detect(frames, stamps)
     assert result.n_candidates >= 1
@@ -51,7 +42,8 @@ def test_reference_selects_the_moving_blob() -> None:
     assert {"avia_denoise", "global_dbscan", "local_scoring", "spline"} <= set(result.timings)
 
 
-def test_reference_without_candidates_returns_no_estimate() -> None:
+def test_reference_without_candidates_returns_no_estimate(benchmark_module) -> None:
+    reference_paper = benchmark_module("reference_paper")
     frames, (stamps, _) = _scene()
     without_drone = [Frame(f.stamp, f.sensor, f.xyz[f.xyz[:, 2] < 15]) for f in frames]
     result = reference_paper.reference_detect(without_drone, stamps)
