@@ -31,6 +31,9 @@ from clusterfilter_ros.core.streaming import run_streaming
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from datasets import sim_fingerprint  # noqa: E402
 
+#: Where the accuracy scripts keep simulated recordings between runs (``--cache``).
+SIM_CACHE = Path("/tmp/clusterfilter_sim_cache")
+
 DEFAULT_SCENARIOS = [
     "default",
     "takeoff_landing",
@@ -140,7 +143,7 @@ def main(argv=None) -> int:
         default="default",
         help="paper: the paper's published settings (PAPER_PRESET) before any --param",
     )
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
+    ap.add_argument("--cache", type=Path, default=SIM_CACHE)
     ap.add_argument("--json", type=Path, help="also write all rows as JSON here")
     ap.add_argument("--markdown", action="store_true", help="print the summary as Markdown")
     ap.add_argument("--plot-dir", type=Path, help="write one evaluation plot per run here")

@@ -18,7 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from detector_accuracy import load_sim, run_case  # noqa: E402
+from detector_accuracy import SIM_CACHE, load_sim, run_case  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -27,7 +27,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="+", default=["no_drone", "no_drone_birds"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[100, 101, 102])
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
+    ap.add_argument("--cache", type=Path, default=SIM_CACHE)
     args = ap.parse_args(argv)
     total: collections.Counter = collections.Counter()
     for scenario in args.scenarios:

@@ -49,7 +49,7 @@ from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 from clusterfilter_ros.sim.raycast import CLASS_NAMES
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from detector_accuracy import drone_hit_stamps, load_sim  # noqa: E402
+from detector_accuracy import SIM_CACHE, drone_hit_stamps, load_sim  # noqa: E402
 
 #: Confidence factors reported for an unselected drone cluster (see scoring.py).
 FEATURES = (
@@ -332,7 +332,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenarios", nargs="+", default=["default", "flyover", "hover"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
-    ap.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
+    ap.add_argument("--cache", type=Path, default=SIM_CACHE)
     ap.add_argument("--clusters", action="store_true", help="print drone clusters' features")
     ap.add_argument("--duration", type=float, help="simulate this many seconds (default: all)")
     ap.add_argument("--mode", choices=("offline", "stream"), default="offline")

@@ -28,7 +28,7 @@ from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.streaming import run_streaming
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from detector_accuracy import estimates_to_positions, load_sim  # noqa: E402
+from detector_accuracy import SIM_CACHE, estimates_to_positions, load_sim  # noqa: E402
 
 MIN_SPEED = 0.5  # m/s: slower estimates have no meaningful along-track direction
 HIT_RADIUS = 2.0  # m, as the evaluator's detection radius
@@ -70,7 +70,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenarios", nargs="+", default=["avia_only"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    parser.add_argument("--cache", type=Path, default=Path("/tmp/clusterfilter_sim_cache"))
+    parser.add_argument("--cache", type=Path, default=SIM_CACHE)
     args = parser.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     header = "scenario seed mode: n hits rmse | moving along_mean along_sd cross_rms lag"
