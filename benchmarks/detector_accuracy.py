@@ -94,6 +94,20 @@ def dedupe(pred: TimedPositions) -> TimedPositions:
     return TimedPositions(pred.stamps[keep], pred.xyz[keep])
 
 
+def evaluate_on_sim(sim, pred: TimedPositions):
+    """:func:`evaluate` of predictions against the recording's ground truth, detection
+    counted over the time the drone is observable (false alarms without a drone)."""
+    frames = sim.sequence.frames
+    gt = sim.sequence.ground_truth
+    duration = frames[-1].stamp - frames[0].stamp
+    if gt is None or len(gt) == 0:
+        gt = TimedPositions(np.empty(0), np.empty((0, 3)))
+        obs = None
+    else:
+        obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
+    return evaluate(pred, gt, observable=obs, duration=duration)
+
+
 def run_case(
     sim, mode: str, values: dict, plot: Path | None = None
 ) -> tuple[dict, TimedPositions, float]:
@@ -109,19 +123,13 @@ def run_case(
         pred = estimates_to_positions(run_streaming(frames, params))
     seconds = time.perf_counter() - start
     pred = dedupe(TimedPositions(pred.stamps, pred.xyz))
+    res = evaluate_on_sim(sim, pred)
     gt = sim.sequence.ground_truth
-    duration = frames[-1].stamp - frames[0].stamp
-    if gt is None or len(gt) == 0:
-        gt = TimedPositions(np.empty(0), np.empty((0, 3)))
-        obs = None
-    else:
-        obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
-    res = evaluate(pred, gt, observable=obs, duration=duration)
     if plot is not None:
         from clusterfilter_ros.plots import plot_evaluation
 
         plot_evaluation(
-            gt if len(gt) else None,
+            gt if gt is not None and len(gt) else None,
             pred,
             plot,
             drone_points=drone_points,

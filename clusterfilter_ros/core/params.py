@@ -159,6 +159,10 @@ class ParamSet:
         return new
 
     def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            # Private and special names are never parameters; copy and pickle look for
+            # them (e.g. __setstate__) on an instance whose _values is not set yet.
+            raise AttributeError(name)
         try:
             return self._values[name]
         except KeyError:

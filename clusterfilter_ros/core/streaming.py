@@ -32,6 +32,8 @@ import math
 import time
 from collections import deque
 from collections.abc import Iterable, Mapping
+from concurrent import futures
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,13 +79,54 @@ class _TrackSample:
     points: np.ndarray  # (n, 3) float32 the drone points themselves
 
 
+@dataclass(frozen=True)
+class _HistorySnapshot:
+    """What one re-clustering reads: the frames' hits since the last one, copies of the
+    history's points and the state it needs, so that it can run while frames keep
+    arriving (background mode). Only the re-clustering touches ``grid``."""
+
+    now: float
+    origin: float
+    grid: BackgroundGrid
+    hit_keys: np.ndarray  # (M,) int64 static_voxel keys of the pending hits
+    hit_times: np.ndarray  # (M,) float64
+    xyz: np.ndarray | None  # (N, 3) float32; None while warming up or with no history
+    t: np.ndarray | None  # (N,) float64
+    static_keys: np.ndarray | None  # (N,) int64 static_voxel keys of the points
+    expected: tuple[np.ndarray, float] | None  # (position, gate) of the reported track
+    params: ParamSet
+
+
+@dataclass(frozen=True)
+class _TrackChoice:
+    """The outcome of a re-clustering: the new static voxels and the track's samples."""
+
+    snapshot: _HistorySnapshot
+    static: np.ndarray  # sorted static voxel keys after the pending hits
+    samples: list[_TrackSample] | None  # None: no track
+    confidence: float
+    new_track: bool  # a selected candidate (False: an existing track kept by hysteresis)
+    clusters: int
+    foreground_points: int  # history points left after static suppression
+    elapsed_ms: float
+
+
 class StreamingDetector:
     """Push frames one at a time; get an :class:`Estimate` (or None) for each."""
 
-    def __init__(self, params: ParamSet | None = None) -> None:
+    def __init__(self, params: ParamSet | None = None, *, background: bool = False) -> None:
+        """``background``: run each re-clustering on a worker thread while later frames
+        keep being processed (their estimates come from the current track until it
+        finishes), instead of inside the ``push`` that triggered it. Its result is applied
+        by the first push after it finished, and at the latest by the first frame
+        ``recluster_period`` of stream time after the one that started it (that push
+        waits for it). Estimates then depend on how fast the machine is; the default
+        (False) is deterministic."""
         self.params = detector_params() if params is None else params.copy()
+        self.background = background
         self.frames_pushed = 0
         self.frames_rejected = 0
+        self._executor: ThreadPoolExecutor | None = None
         self.reset()
 
     # ------------------------------------------------------------------ public API
@@ -100,6 +143,9 @@ class StreamingDetector:
         self._now = -math.inf
         self._origin = math.nan
         self._last_recluster = -math.inf
+        # The background re-clustering in flight and the main-thread time spent on it.
+        self._job: Future[_TrackChoice] | None = None
+        self._job_ms = 0.0
         self._last_recluster_ms = 0.0
         self._recluster_ms_total = 0.0
         self._reclusters = 0
@@ -120,6 +166,22 @@ class StreamingDetector:
         self._background.params = new
         if changed & _STRUCTURAL:
             self.reset()
+
+    def finish_recluster(self, timeout: float | None = None) -> bool:
+        """Wait for a background re-clustering in flight and apply it now; True if one
+        was applied. (A no-op without ``background``: re-clusterings finish in ``push``.)
+        Raises TimeoutError after ``timeout`` seconds."""
+        if self._job is None:
+            return False
+        self._job.result(timeout)
+        return self._collect_recluster()
+
+    def close(self) -> None:
+        """Stop the background worker (an unfinished re-clustering is dropped)."""
+        self._job = None
+        if self._executor is not None:
+            self._executor.shutdown(wait=True, cancel_futures=True)
+            self._executor = None
 
     def push(self, frame: Frame) -> Estimate | None:
         """Add one frame; return the drone position at ``frame.stamp`` or None."""
@@ -160,9 +222,16 @@ class StreamingDetector:
         self._chunks.append(_Chunk(stamp, xyz, t, static_keys))
         self._chunk_points += xyz.shape[0]
         self._evict_chunks()
-        if self._now - self._last_recluster >= self.params.recluster_period:
-            self._recluster()
-        elif xyz.shape[0] and self._track:
+        job = self._job
+        if job is not None and self._now - self._last_recluster >= self.params.recluster_period:
+            # A background re-clustering lags the stream by at most recluster_period: when
+            # frames come faster than it runs (a fast replay), the stream waits for it.
+            futures.wait([job])
+        # A re-clustering applied here has caught its track up through this frame.
+        caught_up = self._collect_recluster()
+        if self._job is None and self._now - self._last_recluster >= self.params.recluster_period:
+            caught_up = self._recluster() or caught_up
+        if not caught_up and xyz.shape[0] and self._track:
             self._extend_track(stamp, xyz, t)
         estimate = self._estimate(stamp)
         self._last_push_ms = (time.perf_counter() - start) * 1e3
@@ -196,6 +265,7 @@ class StreamingDetector:
             "last_recluster_ms": self._last_recluster_ms,
             "mean_recluster_ms": self._recluster_ms_total / max(self._reclusters, 1),
             "reclusters": float(self._reclusters),
+            "recluster_in_flight": float(self._job is not None),
             "last_push_ms": self._last_push_ms,
             "frames_pushed": float(self.frames_pushed),
             "frames_rejected": float(self.frames_rejected),
@@ -236,11 +306,12 @@ class StreamingDetector:
         while self._track and self._track[0].t < lo:
             self._track.popleft()
 
-    def _recluster(self) -> None:
+    def _recluster(self) -> bool:
+        """Start a re-clustering: the pending frames enter the persistence map, static
+        points leave the history, and the history is clustered and scored, here or on
+        the background worker. True if its result was applied before returning."""
         start = time.perf_counter()
         p = self.params
-        # Clusters are scored with streaming's own smallest candidate size.
-        ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
         self._last_recluster = self._now
         if self._pending:
             keys = np.concatenate([k for k, _ in self._pending])
@@ -248,68 +319,69 @@ class StreamingDetector:
             self._pending.clear()
         else:
             keys, times = np.empty(0, np.int64), np.empty(0)
-        self._background.update(keys, times, self._now)
-        self._static = self._background.static_keys()
-        if p.static_suppression and self._static.size:
-            self._drop_static_from_history()
         previous = None
         if self._selected_conf >= p.min_confidence and self._track:
             previous = self._fit(self._now)
             self._last_reported = self._track_state()
-        old_track = list(self._track)
-        self._track.clear()
-        self._selected_conf = 0.0
-        self._clusters = 0
-        self._foreground_points = 0
+        xyz = t = static_keys = None
         warming_up = self._now - self._origin < p.warmup
         if self._chunks and self._chunk_points and not warming_up:
             xyz = np.concatenate([c.xyz for c in self._chunks])
             t = np.concatenate([c.t for c in self._chunks])
-            self._foreground_points = int(t.size)
-            labels, k = global_clusters(xyz, t, p, passes=p.stream_link_passes)
-            self._clusters = k
-            if k:
-                # Windows aligned to the stream's first stamp (deterministic), unless the
-                # stream's clock jumped so far that the offsets would not fit an int64.
-                t0 = self._origin if 0 <= t.min() - self._origin < 1e9 else None
-                structure = self._static if p.static_suppression else None
-                first = float(t[labels >= 0].min())
-                scorer = functools.partial(
-                    score_clusters,
-                    t0=t0 if t0 is not None else first,
-                    coherence_origin=first,
-                    min_track_seconds=p.stream_min_track_seconds,
-                    structure_keys=structure,
-                )
-                scores = scorer(labels, xyz, t, ps, n_clusters=k)
-                if p.split_merged:
-                    labels, k, scores, _ = split_and_score(
-                        labels, xyz, t, scores, ps, scorer, structure, p.stream_split_min_extent
-                    )
-                chosen = select_clusters(scores, ps)
-                if chosen:
-                    # The selected cluster that was seen last is the one being tracked.
-                    best = max(chosen[:3], key=lambda c: scores.t_last[c])
-                    self._selected_conf = float(scores.confidence[best])
-                    self._rebuild_track(labels == best, xyz, t)
-                    self._carry_over(old_track)
-                    self._catch_up()
-                elif p.keep_confidence < p.min_confidence:
-                    # Hysteresis: the cluster holding the reported track's recent
-                    # points continues it if it passes the gates with keep_confidence.
-                    where = self._expected_position(previous)
-                    c = None if where is None else self._track_cluster(*where, labels, xyz, t)
-                    if (
-                        c is not None
-                        and not self._keep_cluster(c, scores, labels, xyz, t)
-                        and p.hover_detection
-                        and p.hover_keep_frames < p.hover_min_frames
-                    ):
-                        # A hovering drone 10-20 m away leaves about as many frames in
-                        # the history as hover_min_frames asks: once reported, fewer
-                        # suffice.
-                        self._keep_hovering(c, where[0], labels, xyz, t, k, scorer, ps)
-        ms = (time.perf_counter() - start) * 1e3
+            static_keys = np.concatenate([c.static_keys for c in self._chunks])
+        snapshot = _HistorySnapshot(
+            now=self._now,
+            origin=self._origin,
+            grid=self._background,
+            hit_keys=keys,
+            hit_times=times,
+            xyz=xyz,
+            t=t,
+            static_keys=static_keys,
+            expected=self._expected_position(previous),
+            params=p,
+        )
+        self._job_ms = (time.perf_counter() - start) * 1e3
+        if self.background:
+            if self._executor is None:
+                self._executor = ThreadPoolExecutor(1, thread_name_prefix="clusterfilter-recluster")
+            self._job = self._executor.submit(_recluster_snapshot, snapshot)
+            return False
+        self._apply_choice(_recluster_snapshot(snapshot))
+        return True
+
+    def _collect_recluster(self) -> bool:
+        """Apply the background re-clustering if it has finished; True if it was."""
+        job = self._job
+        if job is None or not job.done():
+            return False
+        self._job = None
+        self._apply_choice(job.result())  # re-raises the worker's exception, if any
+        return True
+
+    def _apply_choice(self, choice: _TrackChoice) -> None:
+        """Make the re-clustering's outcome the state: points of voxels that became static
+        leave the history, the chosen samples become the track, returns the previous
+        track had gathered since are carried over and the history after the new track's
+        newest sample is caught up (in background mode also the frames pushed meanwhile)."""
+        start = time.perf_counter()
+        self._static = choice.static
+        if self.params.static_suppression and self._static.size:
+            self._drop_static_from_history()
+        old_track = list(self._track)
+        self._track.clear()
+        self._selected_conf = 0.0
+        self._clusters = choice.clusters
+        self._foreground_points = choice.foreground_points
+        if choice.samples is not None:
+            self._selected_conf = choice.confidence
+            self._track.extend(choice.samples)
+            if choice.new_track:
+                self._carry_over(old_track)
+                self._catch_up()
+            else:
+                self._catch_up(after=choice.snapshot.now)
+        ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
@@ -339,64 +411,6 @@ class StreamingDetector:
         assert pred is not None  # the track has a sample at ``last``
         return last, pred[0], pred[3]
 
-    def _keep_hovering(
-        self,
-        c: int,
-        predicted: np.ndarray,
-        labels: np.ndarray,
-        xyz: np.ndarray,
-        t: np.ndarray,
-        k: int,
-        scorer: Any,
-        scoring: ParamSet,
-    ) -> bool:
-        """Hysteresis for a hovering track, tried when cluster ``c`` (the one holding the
-        track's recent points) did not keep it as scored: ``c`` without its points
-        farther than ``track_gate`` from ``predicted`` (a bird passing a hovering drone
-        leaves returns metres away in its cluster for the whole history, and their
-        residual would fail it), re-scored with ``hover_keep_frames`` frames instead of
-        ``hover_min_frames``. Only a cluster that still counts as hovering gains by this; a
-        moving track's cluster cut down to its last metres fails the gates. ``scoring``:
-        the parameters the re-clustering scored with. True if it continued the track."""
-        p = self.params
-        far = labels == c
-        far[far] = np.sum((xyz[far].astype(np.float64) - predicted) ** 2, axis=1) > p.track_gate**2
-        if far.any():
-            labels = labels.copy()
-            labels[far] = -1
-        relaxed = scorer(
-            labels,
-            xyz,
-            t,
-            params=scoring.copy(hover_min_frames=p.hover_keep_frames),
-            n_clusters=k,
-        )
-        return self._keep_cluster(c, relaxed, labels, xyz, t)
-
-    def _keep_cluster(
-        self, c: int, scores: Any, labels: np.ndarray, xyz: np.ndarray, t: np.ndarray
-    ) -> bool:
-        """Continue the reported track with cluster ``c`` if it passes the gates with at
-        least ``keep_confidence``; True if it did."""
-        p = self.params
-        if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
-            # Reported at min_confidence: the track was confirmed, its evidence is weaker now.
-            self._selected_conf = float(p.min_confidence)
-            self._rebuild_track(labels == c, xyz, t)
-            return True
-        return False
-
-    def _track_cluster(
-        self, predicted: np.ndarray, gate: float, labels: np.ndarray, xyz: np.ndarray, t: np.ndarray
-    ) -> int | None:
-        """The cluster holding most of the points of the last ``track_window`` within
-        ``gate`` of ``predicted``, or None."""
-        recent = (t >= self._now - self.params.track_window) & (labels >= 0)
-        near = recent & (np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= gate**2)
-        if not near.any():
-            return None
-        return int(np.bincount(labels[near]).argmax())
-
     def _carry_over(self, old_track: list[_TrackSample]) -> None:
         """Re-append samples the previous track had gathered between re-clusterings (gated
         returns the clusterer may now call noise) beyond the rebuilt track's newest one,
@@ -412,14 +426,15 @@ class StreamingDetector:
                 break
             self._track.append(sample)
 
-    def _catch_up(self) -> None:
-        """Extend the rebuilt track through the history frames after its newest sample,
-        as :meth:`_extend_track` would have done had they arrived after this
-        re-clustering (a sparse drone's newest return is often a cluster of its own)."""
+    def _catch_up(self, after: float = -math.inf) -> None:
+        """Extend the rebuilt track through the history frames after its newest sample
+        (and after ``after``), as :meth:`_extend_track` would have done had they arrived
+        after this re-clustering (a sparse drone's newest return is often a cluster of
+        its own)."""
         if not self._track:
             return
         for chunk in self._chunks:
-            if chunk.stamp > self._track[-1].t and chunk.xyz.shape[0]:
+            if chunk.stamp > max(self._track[-1].t, after) and chunk.xyz.shape[0]:
                 self._extend_track(chunk.stamp, chunk.xyz, chunk.t)
 
     def _drop_static_from_history(self) -> None:
@@ -442,32 +457,8 @@ class StreamingDetector:
             self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
 
     def _rebuild_track(self, mask: np.ndarray, xyz: np.ndarray, t: np.ndarray) -> None:
-        """The track from the points in ``mask``: one sample per half frame period,
-        skipping a sample that no object could have reached from the sample kept before
-        it (deviation 39)."""
-        pts, tt = xyz[mask], t[mask]
-        if tt.size == 0:
-            return
-        half = self.params.frame_period / 2
-        bins = np.floor((tt - tt.min()) / half + 1e-6).astype(np.int64)
-        order = np.argsort(bins, kind="stable")
-        bins, pts, tt = bins[order], pts[order], tt[order]
-        cuts = np.nonzero(np.diff(bins))[0] + 1
-        p = self.params
-        last = None
-        for idx in np.split(np.arange(bins.size), cuts):
-            group = pts[idx]
-            position = group.mean(axis=0, dtype=np.float64)
-            sample = _TrackSample(float(tt[idx].mean()), position, group)
-            if last is not None:
-                # A sample farther from the one kept before than track_gate plus
-                # link_max_speed allows is another object the linking joined to the
-                # cluster (a bird's returns at its end would become the track's newest).
-                reach = p.track_gate + p.link_max_speed * (sample.t - last.t)
-                if float(np.sum((sample.position - last.position) ** 2)) > reach * reach:
-                    continue
-            self._track.append(sample)
-            last = sample
+        """Append the samples of the points in ``mask`` (see :func:`_track_samples`)."""
+        self._track.extend(_track_samples(mask, xyz, t, self.params))
 
     def _fit(self, stamp: float) -> tuple[np.ndarray, int] | None:
         """Position at ``stamp`` from the track's last track_window seconds of samples
@@ -573,6 +564,161 @@ class StreamingDetector:
         if n < p.min_points:
             return None
         return Estimate(stamp, reported_positions(position, p)[0], self._selected_conf, n)
+
+
+def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
+    """One re-clustering (reads only the snapshot and updates only its persistence map, so
+    it may run on another thread): the pending hits enter the map, the history without
+    its static points is clustered and scored, and the track is the best selected
+    candidate that was seen last or, failing that, the reported track's cluster if
+    hysteresis keeps it."""
+    start = time.perf_counter()
+    p = snap.params
+    snap.grid.update(snap.hit_keys, snap.hit_times, snap.now)
+    static = snap.grid.static_keys()
+    xyz, t = snap.xyz, snap.t
+    if xyz is not None and snap.static_keys is not None and p.static_suppression and static.size:
+        moving = np.flatnonzero(voxel.lookup(static, snap.static_keys) < 0)
+        if moving.size < snap.static_keys.size:
+            xyz, t = xyz.take(moving, axis=0), t.take(moving)
+    structure = static if p.static_suppression else None
+
+    def choice(mask: np.ndarray | None, confidence: float, new: bool, k: int) -> _TrackChoice:
+        samples = None if mask is None else _track_samples(mask, xyz, t, p)
+        ms = (time.perf_counter() - start) * 1e3
+        n = 0 if t is None else int(t.size)
+        return _TrackChoice(snap, static, samples, confidence, new, k, n, ms)
+
+    if xyz is None or t is None or t.size == 0:
+        return choice(None, 0.0, False, 0)
+    # Clusters are scored with streaming's own smallest candidate size.
+    ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
+    labels, k = global_clusters(xyz, t, p, passes=p.stream_link_passes)
+    if not k:
+        return choice(None, 0.0, False, k)
+    # Windows aligned to the stream's first stamp (deterministic), unless the stream's
+    # clock jumped so far that the offsets would not fit an int64.
+    t0 = snap.origin if 0 <= t.min() - snap.origin < 1e9 else None
+    first = float(t[labels >= 0].min())
+    scorer = functools.partial(
+        score_clusters,
+        t0=t0 if t0 is not None else first,
+        coherence_origin=first,
+        min_track_seconds=p.stream_min_track_seconds,
+        structure_keys=structure,
+    )
+    scores = scorer(labels, xyz, t, ps, n_clusters=k)
+    if p.split_merged:
+        labels, k, scores, _ = split_and_score(
+            labels, xyz, t, scores, ps, scorer, structure, p.stream_split_min_extent
+        )
+    chosen = select_clusters(scores, ps)
+    if chosen:
+        # The selected cluster that was seen last is the one being tracked.
+        best = max(chosen[:3], key=lambda c: scores.t_last[c])
+        return choice(labels == best, float(scores.confidence[best]), True, k)
+    if p.keep_confidence >= p.min_confidence or snap.expected is None:
+        return choice(None, 0.0, False, k)
+    # Hysteresis: the cluster holding the reported track's recent points continues it
+    # if it passes the gates with keep_confidence (reported at min_confidence: the track
+    # was confirmed, its evidence is weaker now).
+    predicted, gate = snap.expected
+    c = _track_cluster(predicted, gate, labels, xyz, t, snap.now - p.track_window)
+    if c is None:
+        return choice(None, 0.0, False, k)
+    if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
+        return choice(labels == c, float(p.min_confidence), False, k)
+    if p.hover_detection and p.hover_keep_frames < p.hover_min_frames:
+        # A hovering drone 10-20 m away leaves about as many frames in the history as
+        # hover_min_frames asks: once reported, fewer suffice.
+        mask = _hovering_track(c, predicted, labels, xyz, t, k, scorer, ps)
+        if mask is not None:
+            return choice(mask, float(p.min_confidence), False, k)
+    return choice(None, 0.0, False, k)
+
+
+def _track_samples(
+    mask: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+) -> list[_TrackSample]:
+    """A track from the points in ``mask``: one sample per half frame period, skipping a
+    sample that no object could have reached from the sample kept before it (deviation
+    39)."""
+    pts, tt = xyz[mask], t[mask]
+    if tt.size == 0:
+        return []
+    half = params.frame_period / 2
+    bins = np.floor((tt - tt.min()) / half + 1e-6).astype(np.int64)
+    order = np.argsort(bins, kind="stable")
+    bins, pts, tt = bins[order], pts[order], tt[order]
+    cuts = np.nonzero(np.diff(bins))[0] + 1
+    samples: list[_TrackSample] = []
+    for idx in np.split(np.arange(bins.size), cuts):
+        group = pts[idx]
+        sample = _TrackSample(float(tt[idx].mean()), group.mean(axis=0, dtype=np.float64), group)
+        if samples:
+            # A sample farther from the one kept before than track_gate plus
+            # link_max_speed allows is another object the linking joined to the cluster
+            # (a bird's returns at its end would become the track's newest).
+            last = samples[-1]
+            reach = params.track_gate + params.link_max_speed * (sample.t - last.t)
+            if float(np.sum((sample.position - last.position) ** 2)) > reach * reach:
+                continue
+        samples.append(sample)
+    return samples
+
+
+def _track_cluster(
+    predicted: np.ndarray,
+    gate: float,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    since: float,
+) -> int | None:
+    """The cluster holding most of the points since ``since`` within ``gate`` of
+    ``predicted``, or None."""
+    recent = (t >= since) & (labels >= 0)
+    near = recent & (np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= gate**2)
+    if not near.any():
+        return None
+    return int(np.bincount(labels[near]).argmax())
+
+
+def _hovering_track(
+    c: int,
+    predicted: np.ndarray,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    k: int,
+    scorer: Any,
+    scoring: ParamSet,
+) -> np.ndarray | None:
+    """Hysteresis for a hovering track, tried when cluster ``c`` (the one holding the
+    track's recent points) did not keep it as scored: ``c`` without its points farther
+    than ``track_gate`` from ``predicted`` (a bird passing a hovering drone leaves returns
+    metres away in its cluster for the whole history, and their residual would fail it),
+    re-scored with ``hover_keep_frames`` frames instead of ``hover_min_frames``. Only a
+    cluster that still counts as hovering gains by this; a moving track's cluster cut down
+    to its last metres fails the gates. ``scoring``: the parameters the re-clustering
+    scored with. The mask of the points that continue the track, or None."""
+    far = labels == c
+    far[far] = (
+        np.sum((xyz[far].astype(np.float64) - predicted) ** 2, axis=1) > scoring.track_gate**2
+    )
+    if far.any():
+        labels = labels.copy()
+        labels[far] = -1
+    relaxed = scorer(
+        labels,
+        xyz,
+        t,
+        params=scoring.copy(hover_min_frames=scoring.hover_keep_frames),
+        n_clusters=k,
+    )
+    if relaxed.candidate[c] and relaxed.confidence[c] >= scoring.keep_confidence:
+        return labels == c
+    return None
 
 
 def run_streaming(frames: Iterable[Frame], params: ParamSet | None = None) -> list[Estimate]:

@@ -200,7 +200,8 @@ class DetectorNode(Node):
                 MID360: Extrinsic.from_list(values["mid360_extrinsic"], "mid360_extrinsic"),
             }
             self._detector = StreamingDetector(
-                detector_params({k: v for k, v in values.items() if k in _DETECTOR_NAMES})
+                detector_params({k: v for k, v in values.items() if k in _DETECTOR_NAMES}),
+                background=values["recluster_in_background"],
             )
         except BaseException:
             Node.destroy_node(self)  # nothing of ours to stop yet
@@ -632,6 +633,8 @@ class DetectorNode(Node):
             self._cond.notify_all()
         if self._worker.is_alive() and threading.current_thread() is not self._worker:
             self._worker.join(timeout=30.0)
+        if not self._worker.is_alive():
+            self._detector.close()  # the background re-clustering thread, if any
         counters = self.counters()
         summary = (
             "stopping: received {received}, processed {processed} frames, published "

@@ -100,6 +100,18 @@ NODE_PARAMS: tuple[ParamSpec, ...] = (
         group="node",
     ),
     ParamSpec(
+        "recluster_in_background",
+        "bool",
+        True,
+        "Run each re-clustering (every recluster_period) on a worker thread, so frames "
+        "arriving meanwhile are processed at once with the current track instead of "
+        "waiting tens of milliseconds; false runs it inside the frame that triggers it, "
+        "which makes the poses reproducible (equal to `clusterfilter detect --mode "
+        "stream`).",
+        group="node",
+        read_only=True,
+    ),
+    ParamSpec(
         "backwards_tolerance",
         "float",
         0.5,

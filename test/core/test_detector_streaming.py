@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -382,3 +384,142 @@ def test_a_lost_track_is_looked_for_where_it_would_be_now():
     det._last_reported = (t_last, position, velocity)
     det._now = t_last + 0.5
     assert det._expected_position(None) is None
+
+
+# ------------------------------------------------------------ background re-clustering
+def test_background_reclustering_lets_frames_through_while_it_runs(scene, monkeypatch):
+    from clusterfilter_ros.core import streaming
+
+    frames, _, _ = scene(duration=8.0, wall_points=200)
+    release = threading.Event()
+    returned_while_held: list[bool] = []
+    real = streaming._recluster_snapshot
+
+    def held(snapshot):
+        release.wait(timeout=30.0)  # a re-clustering that takes as long as the test wants
+        return real(snapshot)
+
+    det = StreamingDetector(background=True)
+    for f in frames[:120]:  # 6 s (two lidars): past the warm-up, the drone tracked
+        det.push(f)
+        det.finish_recluster(timeout=30.0)
+    assert det.stats()["reclusters"] > 0 and det.push(frames[120]) is not None
+    det.finish_recluster(timeout=30.0)
+    monkeypatch.setattr(streaming, "_recluster_snapshot", held)
+    for f in frames[121:131]:  # frames[130], 0.5 s on, starts a re-clustering: held
+        det.push(f)
+    reclusters = det.stats()["reclusters"]
+    estimates = []
+    for f in frames[131:139]:  # 0.4 s, under recluster_period: none waits
+        estimates.append(det.push(f))
+        returned_while_held.append(not release.is_set())
+    assert all(returned_while_held)
+    stats = det.stats()
+    assert stats["recluster_in_flight"] == 1.0 and stats["reclusters"] == reclusters
+    # Meanwhile the current track goes on: every frame still has its estimate.
+    assert all(e is not None for e in estimates)
+    release.set()
+    assert det.finish_recluster(timeout=30.0)
+    assert det.stats()["reclusters"] == reclusters + 1
+    assert det.stats()["recluster_in_flight"] == 0.0
+    assert det.push(frames[139]) is not None
+    det.close()
+
+
+def test_a_background_reclustering_lags_the_stream_by_at_most_recluster_period(scene, monkeypatch):
+    from clusterfilter_ros.core import streaming
+
+    frames, _, _ = scene(duration=8.0, wall_points=200)
+    release = threading.Event()
+    real = streaming._recluster_snapshot
+    det = StreamingDetector(background=True)
+    for f in frames[:120]:
+        det.push(f)
+        det.finish_recluster(timeout=30.0)
+    monkeypatch.setattr(
+        streaming, "_recluster_snapshot", lambda s: release.wait(timeout=30.0) and real(s)
+    )
+    det.push(frames[120])  # starts a re-clustering (one is due every 10 frames)
+    assert det.stats()["recluster_in_flight"] == 1.0
+    pushed: list[float] = []
+
+    def push_on() -> None:  # 1 s of frames: the one 0.5 s on must wait for the worker
+        for f in frames[121:141]:
+            det.push(f)
+            pushed.append(f.stamp)
+
+    pusher = threading.Thread(target=push_on)
+    pusher.start()
+    pusher.join(timeout=2.0)
+    assert pusher.is_alive(), "no frame waited for the re-clustering"
+    assert len(pushed) == 9  # frames[121:130]; frames[130] is 0.5 s after frames[120]
+    release.set()
+    pusher.join(timeout=30.0)
+    assert len(pushed) == 20 and det.stats()["reclusters"] >= 1
+    det.close()
+
+
+def test_background_mode_tracks_the_drone_like_the_synchronous_one(scene, drone_path_fn):
+    frames, _, _ = scene(duration=10.0, wall_points=400)
+    sync = run_streaming(frames)
+    det = StreamingDetector(background=True)
+    try:
+        # Each re-clustering is applied on the frame after the one that started it.
+        background = []
+        for f in frames:
+            if (e := det.push(f)) is not None:
+                background.append(e)
+            if det.stats()["recluster_in_flight"]:
+                det._job.result(timeout=30.0)  # finished, not yet applied
+    finally:
+        det.close()
+    assert abs(len(background) - len(sync)) <= 0.05 * len(sync)
+    stamps = np.array([e.stamp for e in background])
+    pos = np.array([e.position for e in background])
+    err = np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.5
+
+
+def test_a_reset_drops_the_background_reclustering_in_flight(scene, monkeypatch):
+    from clusterfilter_ros.core import streaming
+
+    frames, _, _ = scene(duration=5.0, wall_points=200)
+    release = threading.Event()
+    real = streaming._recluster_snapshot
+    monkeypatch.setattr(
+        streaming, "_recluster_snapshot", lambda s: release.wait(timeout=30.0) and real(s)
+    )
+    det = StreamingDetector(background=True)
+    for f in frames[:10]:
+        det.push(f)
+    assert det.stats()["recluster_in_flight"] == 1.0
+    det.update_params({"static_voxel": 1.0})  # structural: the state restarts
+    assert det.stats()["recluster_in_flight"] == 0.0
+    release.set()
+    assert not det.finish_recluster()
+    det.push(frames[10])
+    det.close()
+    det.close()  # idempotent
+
+
+def test_a_failed_background_reclustering_is_raised_by_the_next_push(scene, monkeypatch):
+    from clusterfilter_ros.core import streaming
+
+    frames, _, _ = scene(duration=5.0, wall_points=200)
+
+    def broken(snapshot):
+        raise RuntimeError("clusterer failed")
+
+    monkeypatch.setattr(streaming, "_recluster_snapshot", broken)
+    det = StreamingDetector(background=True)
+    det.push(frames[0])
+    det._job.exception(timeout=30.0)
+    with pytest.raises(RuntimeError, match="clusterer failed"):
+        det.push(frames[1])
+    # The failure is not sticky: the next re-clustering due runs and is applied.
+    monkeypatch.undo()
+    for f in frames[2:20]:
+        det.push(f)
+    det.finish_recluster(timeout=30.0)
+    assert det.stats()["reclusters"] >= 1.0
+    det.close()

@@ -73,7 +73,11 @@ def wait_for_fixture():
 
 class Rig:
     """A detector node plus a client node (replayer, recorder, diagnostics) in one context,
-    spun by one executor in a background thread."""
+    spun by one executor in a background thread.
+
+    The detector re-clusters inside the frame that triggers it (``recluster_in_background``
+    false, unlike the node's default) unless the overrides say otherwise, so that its poses
+    can be compared with :func:`run_streaming`'s exactly."""
 
     def __init__(self, context, overrides: dict | None = None) -> None:
         import rclpy
@@ -86,7 +90,8 @@ class Rig:
         from clusterfilter_ros.ros.record import PoseRecorder
         from clusterfilter_ros.ros.replay import Replayer
 
-        params = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
+        values = {"recluster_in_background": False, **(overrides or {})}
+        params = [Parameter(k, value=v) for k, v in values.items()]
         self.detector = DetectorNode(context=context, parameter_overrides=params)
         self.client = rclpy.create_node("test_client", context=context)
         self.replayer = Replayer(self.client)

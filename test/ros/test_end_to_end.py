@@ -34,6 +34,8 @@ def test_detector_replay_recorder_processes(tmp_path, ros_env, small_sequence):
             str(config_file("detector.yaml")),
             "-p",
             "sync_timeout=1.0",  # margin for a busy CI machine; order must never need it
+            "-p",
+            "recluster_in_background=false",  # reproducible: compared with run_streaming
         ),
         ros_env,
         logs,

@@ -63,6 +63,37 @@ def test_node_poses_equal_run_streaming(make_rig, small_sequence, wait_for):
     assert last.poses[-1].pose.position.x == got.xyz[-1, 0]
 
 
+def test_node_with_background_reclustering_tracks_like_run_streaming(
+    make_rig, small_sequence, wait_for
+):
+    # The node's default: re-clusterings on a worker thread, applied when they finish
+    # (within recluster_period of stream time), so poses can differ from
+    # run_streaming's where a re-clustering changed the track.
+    frames = small_sequence.frames
+    expected = run_streaming(on_the_wire(frames), detector_params())
+    rig = make_rig(qos_depth=1000, max_queue=1000, sync_timeout=1.0, recluster_in_background=True)
+    replay_and_wait(rig, frames, len(frames), wait_for)
+    counters = rig.detector.counters()
+    assert counters["processed"] == len(frames) and counters["errors"] == 0, counters
+    wait_for(lambda: len(rig.recorder) >= 0.8 * len(expected), 10.0)
+    got = rig.recorder.positions()
+    print(f"background: {len(got)} poses, run_streaming {len(expected)}")
+    # Replayed as fast as possible (rate 0), every re-clustering lags by up to
+    # recluster_period (0.5 s) of stream time, so the track is confirmed up to 0.5 s later.
+    assert 0.8 * len(expected) <= len(got) <= 1.05 * len(expected)
+    assert got.stamps[0] <= expected[0].stamp + 0.5 + 0.05
+    by_stamp = {round(e.stamp, 6): e.position for e in expected}
+    common = [
+        (p, by_stamp[round(s, 6)])
+        for s, p in zip(got.stamps, got.xyz, strict=True)
+        if round(s, 6) in by_stamp
+    ]
+    assert len(common) >= 0.8 * len(expected)
+    diff = np.array([np.linalg.norm(a - b) for a, b in common])
+    print(f"differences at common stamps: median {np.median(diff):.3g} m, max {diff.max():.3g} m")
+    assert np.median(diff) < 0.05 and np.mean(diff < 0.5) >= 0.95
+
+
 def test_extrinsic_moves_poses(make_rig, small_sequence, wait_for):
     frames = small_sequence.frames
     shift = [5.0, -3.0, 1.0]
