@@ -62,6 +62,21 @@ def test_paramset_update_is_atomic():
         ps.update({"zzz": 1})
 
 
+def test_paramset_copies_and_pickles():
+    import copy
+    import pickle
+
+    from clusterfilter_ros.core.params import detector_params
+
+    ps = detector_params({"eps": 1.5})
+    for clone in (copy.deepcopy(ps), copy.copy(ps), pickle.loads(pickle.dumps(ps))):
+        assert clone == ps and clone.eps == 1.5
+        clone.eps = 2.0  # validated, and independent of the original
+        assert ps.eps == 1.5
+    with pytest.raises(AttributeError):
+        ps.__no_such_special__  # noqa: B018
+
+
 def test_params_file_errors_are_one_line(tmp_path):
     with pytest.raises(InputError, match="does not exist"):
         load_params_file(tmp_path / "missing.yaml")
