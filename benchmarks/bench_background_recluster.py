@@ -16,6 +16,13 @@ frame's stamp, as a driver would deliver them) through both, and prints per mode
         --seeds 100 101 [--rate 1]
 
 Each (seed, mode) takes the recording's length in wall time divided by ``--rate``.
+
+With ``--full-rows-rates 5 7 10`` it measures throughput instead: the benchmark suite's
+worst case (``bench_core.py`` "full rows": the ``default`` seed 1 sequence with every
+MMAUD row a return, looped and time-compressed by the rate) pushed as fast as possible,
+and the wall time per second of stream after the 20 s warm-up, both modes. Below 1 the
+detector keeps up. The background worker overlaps with the frames only where numpy and
+the clusterer release the GIL.
 """
 
 from __future__ import annotations
@@ -67,6 +74,29 @@ def paced_run(sim, background: bool, rate: float) -> tuple[np.ndarray, list, dic
     return latency, estimates, stats
 
 
+def full_rows_load(rate: float, background: bool, warmup: float = 20.0, span: float = 5.0):
+    """Wall seconds per stream second for the full-row stream at ``rate`` (after warm-up)."""
+    from datasets import full_row_frames, simulated, stream
+
+    params = detector_params()
+    frames = full_row_frames(
+        simulated("default", 1, 20.0).sequence.frames, min_z=params.mid360_min_z
+    )
+    detector = StreamingDetector(params, background=background)
+    first = started = None
+    try:
+        for frame in stream(frames, rate, warmup + span):
+            first = frame.stamp if first is None else first
+            if started is None and frame.stamp - first >= warmup:
+                started = time.perf_counter()
+            detector.push(frame)
+        detector.finish_recluster()
+        assert started is not None
+        return (time.perf_counter() - started) / span
+    finally:
+        detector.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="avia_only")
@@ -74,7 +104,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=1.0, help="replay speed (1 = real time)")
     ap.add_argument("--duration", type=float, help="simulate this many seconds (default: all)")
     ap.add_argument("--cache", type=Path, default=SIM_CACHE)
+    ap.add_argument(
+        "--full-rows-rates",
+        nargs="+",
+        type=float,
+        metavar="RATE",
+        help="measure full-row throughput at these multiples of real time instead",
+    )
     args = ap.parse_args(argv)
+    if args.full_rows_rates:
+        print("| full rows at | mode | processing s per stream s | keeps up |")
+        print("|---|---|---|---|")
+        for rate in args.full_rows_rates:
+            for mode, background in MODES.items():
+                load = full_rows_load(rate, background)
+                print(f"| {rate:g}x | {mode} | {load:.2f} | {'yes' if load < 1 else 'no'} |")
+        return 0
     header = (
         "| run | mode | frames | latency p50 / p95 / p99 / max ms | re-clusterings | "
         "mean re-clustering ms | estimates | detection % | RMSE m |"
