@@ -222,14 +222,14 @@ class StreamingDetector:
         self._chunks.append(_Chunk(stamp, xyz, t, static_keys))
         self._chunk_points += xyz.shape[0]
         self._evict_chunks()
-        job = self._job
-        if job is not None and self._now - self._last_recluster >= self.params.recluster_period:
+        due = self._now - self._last_recluster >= self.params.recluster_period
+        if due and self._job is not None:
             # A background re-clustering lags the stream by at most recluster_period: when
             # frames come faster than it runs (a fast replay), the stream waits for it.
-            futures.wait([job])
+            futures.wait([self._job])
         # A re-clustering applied here has caught its track up through this frame.
         caught_up = self._collect_recluster()
-        if self._job is None and self._now - self._last_recluster >= self.params.recluster_period:
+        if due and self._job is None:
             caught_up = self._recluster() or caught_up
         if not caught_up and xyz.shape[0] and self._track:
             self._extend_track(stamp, xyz, t)
@@ -455,10 +455,6 @@ class StreamingDetector:
             moving = ~static[ends[i] - sizes[i] : ends[i]]
             self._chunk_points -= int(sizes[i] - np.count_nonzero(moving))
             self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
-
-    def _rebuild_track(self, mask: np.ndarray, xyz: np.ndarray, t: np.ndarray) -> None:
-        """Append the samples of the points in ``mask`` (see :func:`_track_samples`)."""
-        self._track.extend(_track_samples(mask, xyz, t, self.params))
 
     def _fit(self, stamp: float) -> tuple[np.ndarray, int] | None:
         """Position at ``stamp`` from the track's last track_window seconds of samples

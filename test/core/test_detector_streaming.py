@@ -10,7 +10,7 @@ import pytest
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
-from clusterfilter_ros.core.streaming import StreamingDetector, run_streaming
+from clusterfilter_ros.core.streaming import StreamingDetector, _track_samples, run_streaming
 from clusterfilter_ros.errors import ParameterError
 
 
@@ -158,15 +158,12 @@ def test_a_rebuilt_track_skips_samples_no_object_could_reach():
     bird = drone[-1] + np.array([4.5, -2.5, -2.0]) + np.zeros((3, 3))
     xyz = np.vstack([drone, bird]).astype(np.float32)
     times = np.concatenate([t, bird_t])
-    det = StreamingDetector(detector_params())
-    det._rebuild_track(np.ones(times.size, bool), xyz, times)
-    assert len(det._track) == t.size
-    assert det._track[-1].t == pytest.approx(t[-1])
+    track = _track_samples(np.ones(times.size, bool), xyz, times, detector_params())
+    assert len(track) == t.size
+    assert track[-1].t == pytest.approx(t[-1])
     # A drone at 14 m/s (within link_max_speed) keeps every sample.
     fast = np.stack([14.0 * t, np.zeros_like(t), np.full_like(t, 20.0)], 1).astype(np.float32)
-    det = StreamingDetector(detector_params())
-    det._rebuild_track(np.ones(t.size, bool), fast, t)
-    assert len(det._track) == t.size
+    assert len(_track_samples(np.ones(t.size, bool), fast, t, detector_params())) == t.size
 
 
 def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
