@@ -44,6 +44,7 @@ from detector_accuracy import (  # noqa: E402
     estimates_to_positions,
     evaluate_on_sim,
     load_sim,
+    sim_params,
 )
 
 MODES = {"in push": False, "background": True}
@@ -51,7 +52,7 @@ MODES = {"in push": False, "background": True}
 
 def paced_run(sim, background: bool, rate: float) -> tuple[np.ndarray, list, dict]:
     """Push every frame at its stamp's wall time; (latency ms per frame, estimates, stats)."""
-    params = detector_params({"target_offset": [float(v) for v in sim.prism_offset]})
+    params = sim_params(sim)
     frames = sim.sequence.frames
     detector = StreamingDetector(params, background=background)
     latency = np.empty(len(frames))

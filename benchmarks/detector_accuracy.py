@@ -94,6 +94,14 @@ def dedupe(pred: TimedPositions) -> TimedPositions:
     return TimedPositions(pred.stamps[keep], pred.xyz[keep])
 
 
+def sim_params(sim, values: dict | None = None):
+    """Detector parameters ``values`` with the recording's prism offset as
+    ``target_offset``, so estimates are compared with the prism's ground truth."""
+    return detector_params(
+        {**(values or {}), "target_offset": [float(v) for v in sim.prism_offset]}
+    )
+
+
 def evaluate_on_sim(sim, pred: TimedPositions):
     """:func:`evaluate` of predictions against the recording's ground truth, detection
     counted over the time the drone is observable (false alarms without a drone)."""
@@ -111,7 +119,7 @@ def evaluate_on_sim(sim, pred: TimedPositions):
 def run_case(
     sim, mode: str, values: dict, plot: Path | None = None
 ) -> tuple[dict, TimedPositions, float]:
-    params = detector_params({**values, "target_offset": [float(v) for v in sim.prism_offset]})
+    params = sim_params(sim, values)
     frames = sim.sequence.frames
     start = time.perf_counter()
     drone_points = None

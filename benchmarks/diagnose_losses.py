@@ -43,13 +43,13 @@ from clusterfilter_ros.core.clustering import density_mask
 from clusterfilter_ros.core.evaluation import interpolate_predictions, observable_mask
 from clusterfilter_ros.core.frame import TimedPositions
 from clusterfilter_ros.core.offline import detect_offline, extend_selected, global_clusters
-from clusterfilter_ros.core.params import detector_params, parse_assignments
+from clusterfilter_ros.core.params import parse_assignments
 from clusterfilter_ros.core.preprocess import frame_points, usable_mask
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 from clusterfilter_ros.sim.raycast import CLASS_NAMES
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from detector_accuracy import SIM_CACHE, drone_hit_stamps, load_sim  # noqa: E402
+from detector_accuracy import SIM_CACHE, drone_hit_stamps, load_sim, sim_params  # noqa: E402
 
 #: Confidence factors reported for an unselected drone cluster (see scoring.py).
 FEATURES = (
@@ -342,8 +342,7 @@ def main(argv=None) -> int:
     for scenario in args.scenarios:
         for seed in args.seeds:
             sim = load_sim(scenario, seed, args.cache, args.duration)
-            offset = [float(v) for v in sim.prism_offset]
-            params = detector_params({**values, "target_offset": offset})
+            params = sim_params(sim, values)
             if args.mode == "stream":
                 reasons = stream_miss_reasons(sim, params)
                 total.update(reasons)

@@ -24,11 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from clusterfilter_ros.core.offline import detect_offline
-from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.streaming import run_streaming
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from detector_accuracy import SIM_CACHE, estimates_to_positions, load_sim  # noqa: E402
+from detector_accuracy import SIM_CACHE, estimates_to_positions, load_sim, sim_params  # noqa: E402
 
 MIN_SPEED = 0.5  # m/s: slower estimates have no meaningful along-track direction
 HIT_RADIUS = 2.0  # m, as the evaluator's detection radius
@@ -81,7 +80,7 @@ def main() -> int:
             if len(sim.drone_truth) == 0:
                 print(f"{scenario} s{seed}: no drone, skipped")
                 continue
-            params = detector_params({"target_offset": [float(v) for v in sim.prism_offset]})
+            params = sim_params(sim)
             frames = sim.sequence.frames
             truth_xyz = sim.drone_truth.xyz + np.asarray(sim.prism_offset, dtype=float)
             for mode in ("offline", "stream"):
