@@ -127,8 +127,7 @@ def scene_cloud(frames: list[Frame], params: ParamSet) -> np.ndarray:
     """The accumulated, filtered global cloud of a sequence (what offline clusters)."""
     from clusterfilter_ros.core.offline import global_cloud
 
-    xyz, _t, _noisy, _stamps = global_cloud(frames, params)
-    return np.asarray(xyz, dtype=np.float32)
+    return np.asarray(global_cloud(frames, params).xyz, dtype=np.float32)
 
 
 def resample(base: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:

@@ -18,6 +18,7 @@ over a few seconds only is released (:func:`drifting_static_keys`); streaming, o
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -104,6 +105,40 @@ def suppressed_keys(persistent: np.ndarray, params: ParamSet) -> np.ndarray:
     return _dilate(persistent, params.static_dilation)
 
 
+class _Occupancy(NamedTuple):
+    keys: np.ndarray  # (N,) voxel key per point
+    ukeys: np.ndarray  # (V,) sorted unique keys
+    inverse: np.ndarray  # (N,) index into ukeys per point
+    pair_voxel: np.ndarray  # (P,) voxel index of each distinct (voxel, bin) pair, sorted
+    pair_bin: np.ndarray  # (P,) its time bin
+    bins_per_voxel: np.ndarray  # (V,) distinct bins per voxel
+
+
+def _occupancy(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> _Occupancy:
+    """Which ``static_bin`` time bins (counted from the first point) hit each
+    ``static_voxel`` voxel; ``xyz`` must not be empty."""
+    keys, ukeys, kinv = voxel.unique_voxel_keys(xyz, params.static_voxel)
+    t = np.asarray(t, dtype=np.float64)
+    bins = np.floor((t - t.min()) / params.static_bin).astype(np.int64)
+    kinv = kinv.reshape(-1)
+    n_bins = int(bins.max()) + 1
+    pairs = voxel.unique_ints(kinv * n_bins + bins)
+    pair_voxel, pair_bin = np.divmod(pairs, n_bins)
+    bins_per_voxel = np.bincount(pair_voxel, minlength=ukeys.size)
+    return _Occupancy(keys, ukeys, kinv, pair_voxel, pair_bin, bins_per_voxel)
+
+
+def persistent_mask(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
+    """(N,) bool: the points in ``static_voxel`` voxels hit in at least
+    ``static_min_bins`` distinct time bins of these points (persistence alone: no
+    released groups, no dilation)."""
+    xyz = np.asarray(xyz).reshape(-1, 3)
+    if xyz.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    occ = _occupancy(xyz, t, params)
+    return (occ.bins_per_voxel >= params.static_min_bins)[occ.inverse]
+
+
 def static_offline(
     xyz: np.ndarray, t: np.ndarray, params: ParamSet
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -113,23 +148,19 @@ def static_offline(
     xyz = np.asarray(xyz).reshape(-1, 3)
     if xyz.shape[0] == 0:
         return np.zeros(0, dtype=bool), np.empty(0, np.int64)
-    keys, ukeys, kinv = voxel.unique_voxel_keys(xyz, params.static_voxel)
-    bins = np.floor((t - t.min()) / params.static_bin).astype(np.int64)
-    kinv = kinv.reshape(-1)
-    n_bins = int(bins.max()) + 1
-    pairs = voxel.unique_ints(kinv * n_bins + bins)
-    pair_voxel, pair_bin = np.divmod(pairs, n_bins)
-    bins_per_voxel = np.bincount(pair_voxel, minlength=ukeys.size)
-    persistent = bins_per_voxel >= params.static_min_bins
-    persistent_keys = ukeys[persistent]
+    occ = _occupancy(xyz, t, params)
+    persistent = occ.bins_per_voxel >= params.static_min_bins
+    persistent_keys = occ.ukeys[persistent]
     if params.static_drift_span > 0 and persistent_keys.size >= 3:
         # pairs are sorted by voxel then bin: a voxel's first and last pairs hold its extremes
-        first = np.searchsorted(pair_voxel, np.flatnonzero(persistent))
-        last = first + bins_per_voxel[persistent] - 1
-        drifting = drifting_static_keys(persistent_keys, pair_bin[first], pair_bin[last], params)
+        first = np.searchsorted(occ.pair_voxel, np.flatnonzero(persistent))
+        last = first + occ.bins_per_voxel[persistent] - 1
+        drifting = drifting_static_keys(
+            persistent_keys, occ.pair_bin[first], occ.pair_bin[last], params
+        )
         persistent_keys = np.setdiff1d(persistent_keys, drifting, assume_unique=True)
     static_keys = suppressed_keys(persistent_keys, params)
-    return voxel.lookup(static_keys, keys) >= 0, static_keys
+    return voxel.lookup(static_keys, occ.keys) >= 0, static_keys
 
 
 class BackgroundGrid:

@@ -15,7 +15,9 @@
    (:func:`select_trimmed`), and only pieces one flight could join
    (:func:`reachable_pieces`); grow each selected track at its ends by the noise
    points and small clusters it was heading for, and fill it inside with those on its
-   path.
+   path; the growth may also take returns the filters removed: the denoise
+   (``extend_denoised``) and the Mid360 floor (``extend_below_floor``), see
+   :func:`growth_only_points`.
 5. Fit the trajectory through the selected points and evaluate it at the frame stamps
    (or given timestamps) inside the supported span.
 """
@@ -30,7 +32,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from clusterfilter_ros.core.background import static_offline
+from clusterfilter_ros.core import voxel
+from clusterfilter_ros.core.background import persistent_mask, static_offline
 from clusterfilter_ros.core.clustering import (
     dbscan_points,
     density_mask,
@@ -46,9 +49,10 @@ from clusterfilter_ros.core.linking import (
     extend_track,
     fill_track,
     link_fragments,
+    linking_reach,
 )
 from clusterfilter_ros.core.params import ParamSet, detector_params
-from clusterfilter_ros.core.preprocess import frame_points
+from clusterfilter_ros.core.preprocess import below_floor_mask, frame_points, points_at
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import score_pieces, split_and_score, split_still
 from clusterfilter_ros.core.trajectory import (
@@ -83,27 +87,57 @@ class OfflineResult:
     selected: list[int] = field(default_factory=list)
 
 
-def global_cloud(
-    frames: Iterable[Frame], params: ParamSet
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Superimpose filtered frames: (xyz (N,3) f32, t (N,), denoise flag (N,) bool, stamps)."""
-    xyzs, ts, flags, stamps = [], [], [], []
+class GlobalCloud(NamedTuple):
+    """The superimposed, filtered frames of a sequence (:func:`global_cloud`)."""
+
+    xyz: np.ndarray  # (N, 3) float32
+    t: np.ndarray  # (N,) float64 per-point time
+    noisy: np.ndarray  # (N,) bool: from a sensor in denoise_sensors
+    stamps: np.ndarray  # sorted unique finite frame stamps
+    floor_xyz: np.ndarray  # (F, 3) float32: Mid360 returns at or below mid360_min_z
+    floor_t: np.ndarray  # (F,) float64
+
+
+def _grows_below_floor(params: ParamSet) -> bool:
+    return bool(params.extend_below_floor) and _grows(params)
+
+
+def _grows(params: ParamSet) -> bool:
+    return params.link_max_gap > 0 and params.extend_max_gap > 0
+
+
+def global_cloud(frames: Iterable[Frame], params: ParamSet) -> GlobalCloud:
+    """Superimpose filtered frames. The Mid360 returns dropped for lying at or below
+    ``mid360_min_z`` are kept apart (``floor_*``) when ``extend_below_floor`` can use
+    them, else those arrays are empty."""
+    xyzs, ts, flags, stamps, floor_xyzs, floor_ts = [], [], [], [], [], []
     denoise = set(params.denoise_sensors)
+    keep_floor = _grows_below_floor(params)
     for frame in frames:
         stamps.append(frame.stamp)
         xyz, t = frame_points(frame, params)
         xyzs.append(xyz)
         ts.append(t)
         flags.append(np.full(t.size, frame.sensor in denoise))
-    if not xyzs:
-        return np.empty((0, 3), np.float32), np.empty(0), np.empty(0, bool), np.empty(0)
+        if keep_floor:
+            floor = below_floor_mask(frame, params)
+            if floor.any():
+                fxyz, ft = points_at(frame, floor)
+                floor_xyzs.append(fxyz)
+                floor_ts.append(ft)
     stamp_arr = np.asarray(stamps, dtype=np.float64)
-    return (
-        np.concatenate(xyzs),
-        np.concatenate(ts),
-        np.concatenate(flags),
+    return GlobalCloud(
+        _stack(xyzs, np.empty((0, 3), np.float32)),
+        _stack(ts, np.empty(0)),
+        _stack(flags, np.empty(0, bool)),
         np.unique(stamp_arr[np.isfinite(stamp_arr)]),
+        _stack(floor_xyzs, np.empty((0, 3), np.float32)),
+        _stack(floor_ts, np.empty(0)),
     )
+
+
+def _stack(parts: list[np.ndarray], empty: np.ndarray) -> np.ndarray:
+    return np.concatenate(parts) if parts else empty
 
 
 def cluster_labels(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
@@ -376,6 +410,67 @@ def extend_selected(
     return out
 
 
+def growth_only_points(
+    cloud: GlobalCloud,
+    denoised: np.ndarray,
+    structure: np.ndarray | None,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    selected: list[int],
+    params: ParamSet,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(xyz (M, 3) float32, t (M,)): points kept out of clustering and scoring that a
+    selected track may still grow into (:func:`extend_selected`).
+
+    - ``extend_denoised``: the points of ``cloud`` the denoise removed (``denoised``
+      marks them), except those in the suppressed static voxels ``structure``. A drone
+      far away leaves one Avia return a second or less, too sparse for the density
+      count, but where its track was heading.
+    - ``extend_below_floor``: the Mid360 returns at or below ``mid360_min_z`` within one
+      growth step (the linking reach for ``extend_max_gap``) of a selected track's first
+      or last point, except those in voxels hit in ``static_min_bins`` or more time bins
+      (:func:`~.background.persistent_mask`): the ground, walls and parked things stay
+      out, a drone taking off or landing below the Mid360's height does not.
+
+    ``labels``, ``xyz`` and ``t`` are the clustered points (after the filters).
+    """
+    parts_xyz, parts_t = [], []
+    if params.extend_denoised and denoised.any():
+        dxyz, dt = cloud.xyz[denoised], cloud.t[denoised]
+        if structure is not None and structure.size:
+            off = voxel.lookup(structure, voxel.voxel_keys(dxyz, params.static_voxel)) < 0
+            dxyz, dt = dxyz[off], dt[off]
+        parts_xyz.append(dxyz)
+        parts_t.append(dt)
+    if _grows_below_floor(params) and cloud.floor_t.size and selected:
+        radius = float(linking_reach(params.extend_max_gap, params))
+        near = np.zeros(cloud.floor_t.size, dtype=bool)
+        for end in _track_ends(labels, xyz, t, selected):
+            d = cloud.floor_xyz - end
+            near |= np.einsum("ij,ij->i", d, d) <= radius * radius
+        fxyz, ft = cloud.floor_xyz[near], cloud.floor_t[near]
+        transient = ~persistent_mask(fxyz, ft, params)
+        parts_xyz.append(fxyz[transient])
+        parts_t.append(ft[transient])
+    return (
+        _stack(parts_xyz, np.empty((0, 3), np.float32)).astype(np.float32, copy=False),
+        _stack(parts_t, np.empty(0)),
+    )
+
+
+def _track_ends(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, selected: list[int]
+) -> np.ndarray:
+    """(2 * len(selected), 3) float32: each selected cluster's first and last point."""
+    ends = []
+    for c in selected:
+        m = np.flatnonzero(labels == c)
+        if m.size:
+            ends += [xyz[m[np.argmin(t[m])]], xyz[m[np.argmax(t[m])]]]
+    return np.asarray(ends, dtype=np.float32).reshape(-1, 3)
+
+
 def detect_offline(
     frames: Iterable[Frame],
     params: ParamSet | None = None,
@@ -383,11 +478,14 @@ def detect_offline(
 ) -> OfflineResult:
     """Detect the drone over a whole sequence; see the module docstring."""
     params = detector_params() if params is None else params
-    xyz, t, noisy, stamps = global_cloud(frames, params)
-    keep = np.ones(t.size, dtype=bool)
+    cloud = global_cloud(frames, params)
+    noisy, stamps = cloud.noisy, cloud.stamps
+    keep = np.ones(cloud.t.size, dtype=bool)
     if noisy.any():
-        keep[noisy] = density_mask(xyz[noisy], params.denoise_voxel, params.denoise_min_points)
-    xyz, t = xyz[keep], t[keep]
+        keep[noisy] = density_mask(
+            cloud.xyz[noisy], params.denoise_voxel, params.denoise_min_points
+        )
+    xyz, t = cloud.xyz[keep], cloud.t[keep]
     structure = None
     if params.static_suppression and t.size:
         static, structure = static_offline(xyz, t, params)
@@ -429,6 +527,12 @@ def detect_offline(
         # growth (a bird's piece beside the drone's would).
         # Nor do the points trimmed off a selected cluster.
         exclude = trimmed if was_split is None else was_split | trimmed
+        if _grows(params):
+            gxyz, gt = growth_only_points(cloud, ~keep, structure, labels, xyz, t, selected, params)
+            if gt.size:
+                xyz, t = np.concatenate([xyz, gxyz]), np.concatenate([t, gt])
+                labels = np.concatenate([labels, np.full(gt.size, -1, labels.dtype)])
+                exclude = np.concatenate([exclude, np.zeros(gt.size, dtype=bool)])
         labels = extend_selected(labels, xyz, t, scores, selected, params, exclude)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.

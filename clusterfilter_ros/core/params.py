@@ -512,6 +512,23 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "extend_denoised",
+        "bool",
+        True,
+        "Offline: a selected track's growth may also take the returns the denoise removed "
+        "(outside static structure): a far drone's isolated Avia returns; false = only "
+        "noise points and small clusters.",
+    ),
+    ParamSpec(
+        "extend_below_floor",
+        "bool",
+        True,
+        "Offline: a selected track's growth may also take Mid360 returns at or below "
+        "mid360_min_z in voxels hit in fewer than static_min_bins time bins (a drone "
+        "taking off or landing; ground, walls and parked things are persistent and stay "
+        "out); false = the floor filter holds for growth too.",
+    ),
+    ParamSpec(
         "split_merged",
         "bool",
         True,

@@ -8,8 +8,9 @@ from clusterfilter_ros.core.frame import MID360, Frame
 from clusterfilter_ros.core.params import ParamSet
 
 
-def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
-    """(N,) bool: the rows of ``frame.xyz`` that :func:`frame_points` keeps."""
+def _in_range(frame: Frame, params: ParamSet) -> np.ndarray:
+    """(N,) bool: finite, non-padding rows within ``max_range`` (nothing if the stamp is
+    not finite)."""
     xyz = frame.xyz
     if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
         return np.zeros(xyz.shape[0], dtype=bool)
@@ -17,10 +18,23 @@ def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
     # infinite for a row with a NaN or infinite coordinate and 0 only for an all-zero
     # padding row, and both comparisons are False for NaN.
     r2 = np.einsum("ij,ij->i", xyz, xyz, dtype=np.float64)
-    keep = (r2 > 0.0) & (r2 <= float(params.max_range) ** 2)
+    return (r2 > 0.0) & (r2 <= float(params.max_range) ** 2)
+
+
+def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
+    """(N,) bool: the rows of ``frame.xyz`` that :func:`frame_points` keeps."""
+    keep = _in_range(frame, params)
     if frame.sensor == MID360:
-        keep &= xyz[:, 2] > params.mid360_min_z
+        keep &= frame.xyz[:, 2] > params.mid360_min_z
     return keep
+
+
+def below_floor_mask(frame: Frame, params: ParamSet) -> np.ndarray:
+    """(N,) bool: the rows :func:`frame_points` drops only for lying at or below
+    ``mid360_min_z`` (Mid360 frames; none for other sensors)."""
+    if frame.sensor != MID360:
+        return np.zeros(frame.xyz.shape[0], dtype=bool)
+    return _in_range(frame, params) & (frame.xyz[:, 2] <= params.mid360_min_z)
 
 
 def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray]:
@@ -30,16 +44,18 @@ def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray
     Mid360, points at or below ``mid360_min_z``. Per-point time is ``stamp + point_time``
     when the frame has per-point offsets, else the stamp.
     """
-    xyz = frame.xyz
-    if xyz.shape[0] == 0 or not np.isfinite(frame.stamp):
-        return np.empty((0, 3), np.float32), np.empty(0, np.float64)
-    keep = usable_mask(frame, params)
+    return points_at(frame, usable_mask(frame, params))
+
+
+def points_at(frame: Frame, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(xyz float32 (N, 3), per-point time float64 (N,)) of the rows ``keep`` marks (a
+    mask from :func:`usable_mask` or :func:`below_floor_mask`)."""
     rows = np.flatnonzero(keep)  # take() by index is several times faster than a mask
-    pts = xyz.take(rows, axis=0)
+    pts = frame.xyz.take(rows, axis=0)
     if frame.point_time is not None:
         offs = frame.point_time.take(rows)
         offs = np.where(np.isfinite(offs) & (np.abs(offs) < 1.0), offs, 0.0)
         t = frame.stamp + offs
     else:
         t = np.full(pts.shape[0], frame.stamp)
-    return np.ascontiguousarray(pts, dtype=np.float32), t
+    return np.ascontiguousarray(pts, dtype=np.float32), np.asarray(t, dtype=np.float64)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.background import BackgroundGrid, static_offline
+from clusterfilter_ros.core.background import BackgroundGrid, persistent_mask, static_offline
 from clusterfilter_ros.core.clustering import spacetime_cluster_points
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import motion_coherence
@@ -29,6 +29,9 @@ def test_offline_persistence_masks_the_wall_not_the_drone():
     static, _ = static_offline(xyz, t, detector_params())
     assert static[~moving].mean() > 0.99
     assert not static[moving].any()
+    # Persistence alone gives the same answer here (no drifting or compact group).
+    assert (persistent_mask(xyz, t, detector_params()) == static).all()
+    assert persistent_mask(np.empty((0, 3)), np.empty(0), detector_params()).size == 0
 
 
 def test_background_grid_learns_and_forgets():

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from clusterfilter_ros.core.frame import MID360, Frame
+from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.offline import (
     detect_offline,
     reachable_pieces,
@@ -206,3 +206,64 @@ def test_returns_of_something_else_do_not_stretch_a_track_over_the_next_piece():
     assert spans.t_last[0] < 10.5 <= spans.t_first[1]
     assert select_clusters(spans, params) == [0, 1]
     assert np.array_equal(spans.t_last[1:], scores.t_last[1:])  # span of the track kept
+
+
+def _climb(t: np.ndarray) -> np.ndarray:
+    """A drone taking off 1.2 m below the Mid360 (the floor, mid360_min_z 0) at 1.5 m/s."""
+    return np.column_stack([10 + 3 * t, np.full(t.size, 5.0), -1.2 + 1.5 * t])
+
+
+def test_growth_takes_a_climbing_drone_below_the_floor_not_the_ground():
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(100):
+        stamp = 1000.0 + 0.1 * i
+        ground = np.column_stack(
+            [rng.uniform(-20, 40, 300), rng.uniform(-20, 20, 300), rng.normal(-1.75, 0.02, 300)]
+        )
+        wall = np.column_stack(
+            [np.full(300, 40.0), rng.uniform(-20, 20, 300), rng.uniform(-1.7, 12, 300)]
+        )
+        drone = _climb(np.array([stamp - 1000.0])) + rng.normal(0, 0.1, (3, 3))
+        frames.append(Frame(stamp, MID360, np.vstack([ground, wall, drone]).astype(np.float32)))
+    grown = detect_offline(frames, detector_params())
+    held = detect_offline(frames, detector_params({"extend_below_floor": False}))
+    # Every drone return, the 24 below the floor included, and nothing of the ground.
+    pts = grown.drone_points
+    assert pts.shape[0] == 300
+    assert (pts[:, 3] <= 0).sum() >= 20
+    assert np.linalg.norm(pts[:, 1:] - _climb(pts[:, 0] - 1000.0), axis=1).max() < 0.6
+    assert not (held.drone_points[:, 3] <= 0).any()
+    # So the track is reported from the first frame, not only once above the floor.
+    assert grown.estimates.stamps[0] - 1000.0 < 0.05 < held.estimates.stamps[0] - 1000.0 - 0.2
+    err = np.linalg.norm(grown.estimates.xyz - _climb(grown.estimates.stamps - 1000.0), axis=1)
+    assert err.max() < 0.2
+
+
+def test_growth_takes_a_fast_drones_isolated_returns_the_denoise_removed():
+    def path(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([10 * t - 30, np.full(t.size, 40.0), np.full(t.size, 30.0)])
+
+    rng = np.random.default_rng(1)
+    frames = []
+    for i in range(100):
+        stamp = 1000.0 + 0.1 * i
+        sky = rng.normal(size=(40, 3))
+        sky[:, 2] = np.abs(sky[:, 2]) + 1.0
+        sky /= np.linalg.norm(sky, axis=1, keepdims=True)
+        parts = [sky * rng.uniform(20, 400, (40, 1))]
+        # 10 m/s: 3 returns a frame for 6 s, then one a second, 10 m apart (isolated).
+        if i <= 60 or i % 10 == 0:
+            n = 3 if i <= 60 else 1
+            parts.append(path(np.array([stamp - 1000.0])) + rng.normal(0, 0.1, (n, 3)))
+        frames.append(Frame(stamp, AVIA, np.vstack(parts).astype(np.float32)))
+    grown = detect_offline(frames, detector_params())
+    held = detect_offline(frames, detector_params({"extend_denoised": False}))
+    assert held.drone_points.shape[0] == 183 and held.estimates.stamps[-1] - 1000.0 < 6.6
+    # The three isolated returns join, no sky noise with them; reported to 9.5 s.
+    pts = grown.drone_points
+    assert pts.shape[0] == 186 and np.allclose(pts[-3:, 0] - 1000.0, [7.0, 8.0, 9.0])
+    assert np.linalg.norm(pts[:, 1:] - path(pts[:, 0] - 1000.0), axis=1).max() < 0.6
+    assert grown.estimates.stamps[-1] - 1000.0 > 9.0
+    err = np.linalg.norm(grown.estimates.xyz - path(grown.estimates.stamps - 1000.0), axis=1)
+    assert err.max() < 0.2

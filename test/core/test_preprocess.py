@@ -6,7 +6,12 @@ import numpy as np
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
-from clusterfilter_ros.core.preprocess import frame_points, usable_mask
+from clusterfilter_ros.core.preprocess import (
+    below_floor_mask,
+    frame_points,
+    points_at,
+    usable_mask,
+)
 
 
 def test_usable_mask_drops_bad_padding_far_and_low_rows():
@@ -34,6 +39,12 @@ def test_usable_mask_drops_bad_padding_far_and_low_rows():
     assert usable_mask(Frame(1.0, MID360, xyz), params).tolist() == expect_mid
     assert usable_mask(Frame(1.0, AVIA, xyz.astype(np.float64)), params).tolist() == expect_avia
     assert not usable_mask(Frame(float("nan"), AVIA, xyz), params).any()
+    # Below the floor: exactly the rows dropped for their height alone (the tiny one and
+    # the low one), for the Mid360 only.
+    floor = below_floor_mask(Frame(1.0, MID360, xyz), params)
+    assert floor.tolist() == [a and not m for a, m in zip(expect_avia, expect_mid, strict=True)]
+    assert not below_floor_mask(Frame(1.0, AVIA, xyz), params).any()
+    assert not below_floor_mask(Frame(float("nan"), MID360, xyz), params).any()
 
 
 def test_frame_points_applies_point_times_and_rejects_wild_offsets():
@@ -43,3 +54,11 @@ def test_frame_points_applies_point_times_and_rejects_wild_offsets():
     pts, t = frame_points(Frame(100.0, AVIA, xyz, point_time=offsets), params)
     assert pts.dtype == np.float32 and pts.shape == (3, 3)
     assert np.allclose(t, [100.05, 100.0, 100.0])
+
+
+def test_points_at_gives_the_marked_rows_with_their_times():
+    xyz = np.array([[10.0, 0.0, -1.0], [11.0, 0.0, 5.0], [12.0, 0.0, -2.0]], np.float32)
+    frame = Frame(100.0, MID360, xyz, point_time=np.array([0.01, 0.02, 0.03]))
+    pts, t = points_at(frame, below_floor_mask(frame, detector_params()))
+    assert pts.tolist() == [[10.0, 0.0, -1.0], [12.0, 0.0, -2.0]]
+    assert np.allclose(t, [100.01, 100.03]) and t.dtype == np.float64
