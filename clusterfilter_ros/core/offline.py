@@ -52,7 +52,7 @@ from clusterfilter_ros.core.linking import (
     linking_reach,
 )
 from clusterfilter_ros.core.params import ParamSet, detector_params
-from clusterfilter_ros.core.preprocess import below_floor_mask, frame_points, points_at
+from clusterfilter_ros.core.preprocess import frame_points, points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import score_pieces, split_and_score, split_still
 from clusterfilter_ros.core.trajectory import (
@@ -115,16 +115,18 @@ def global_cloud(frames: Iterable[Frame], params: ParamSet) -> GlobalCloud:
     keep_floor = _grows_below_floor(params)
     for frame in frames:
         stamps.append(frame.stamp)
-        xyz, t = frame_points(frame, params)
-        xyzs.append(xyz)
-        ts.append(t)
-        flags.append(np.full(t.size, frame.sensor in denoise))
         if keep_floor:
-            floor = below_floor_mask(frame, params)
+            usable, floor = usable_and_below_floor(frame, params)
+            xyz, t = points_at(frame, usable)
             if floor.any():
                 fxyz, ft = points_at(frame, floor)
                 floor_xyzs.append(fxyz)
                 floor_ts.append(ft)
+        else:
+            xyz, t = frame_points(frame, params)
+        xyzs.append(xyz)
+        ts.append(t)
+        flags.append(np.full(t.size, frame.sensor in denoise))
     stamp_arr = np.asarray(stamps, dtype=np.float64)
     return GlobalCloud(
         _stack(xyzs, np.empty((0, 3), np.float32)),

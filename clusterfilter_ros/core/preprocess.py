@@ -32,9 +32,16 @@ def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
 def below_floor_mask(frame: Frame, params: ParamSet) -> np.ndarray:
     """(N,) bool: the rows :func:`frame_points` drops only for lying at or below
     ``mid360_min_z`` (Mid360 frames; none for other sensors)."""
+    return usable_and_below_floor(frame, params)[1]
+
+
+def usable_and_below_floor(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`usable_mask`, :func:`below_floor_mask`) with one range test."""
+    in_range = _in_range(frame, params)
     if frame.sensor != MID360:
-        return np.zeros(frame.xyz.shape[0], dtype=bool)
-    return _in_range(frame, params) & (frame.xyz[:, 2] <= params.mid360_min_z)
+        return in_range, np.zeros(in_range.size, dtype=bool)
+    above = frame.xyz[:, 2] > params.mid360_min_z
+    return in_range & above, in_range & ~above
 
 
 def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray]:
