@@ -447,10 +447,14 @@ def growth_only_points(
         parts_t.append(dt)
     if _grows_below_floor(params) and cloud.floor_t.size and selected:
         radius = float(linking_reach(params.extend_max_gap, params))
-        near = np.zeros(cloud.floor_t.size, dtype=bool)
+        fz = np.ascontiguousarray(cloud.floor_xyz[:, 2])
+        near = np.zeros(fz.size, dtype=bool)
         for end in _track_ends(labels, xyz, t, selected):
-            d = cloud.floor_xyz - end
-            near |= np.einsum("ij,ij->i", d, d) <= radius * radius
+            # Most track ends are far above the floor: a height test first (cheap), the
+            # distance only for the points that pass it.
+            rows = np.flatnonzero(np.abs(fz - end[2]) <= radius)
+            d = cloud.floor_xyz[rows] - end
+            near[rows[np.einsum("ij,ij->i", d, d) <= radius * radius]] = True
         fxyz, ft = cloud.floor_xyz[near], cloud.floor_t[near]
         transient = ~persistent_mask(fxyz, ft, params)
         parts_xyz.append(fxyz[transient])
