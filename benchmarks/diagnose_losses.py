@@ -5,7 +5,11 @@ replayed with that label carried along: usable points, denoise, static suppressi
 clustering, candidate gates, selection. For every ground-truth sample at which the
 drone was observable (a return within +-0.5 s) and no estimate lay within 2 m, the
 first stage that left no drone point within +-0.5 s (or the reason the drone's cluster
-was not reported) is counted.
+was not reported) is counted. The replay is simplified (no splitting, and its growth
+takes no returns the filters removed, as ``extend_denoised`` / ``extend_below_floor``
+let :func:`detect_offline` do): its stage counts are approximate, the hits are
+:func:`detect_offline`'s own, so a "denoise" or "filtered" miss is one that growth did
+not recover either.
 
     .venv/bin/python benchmarks/diagnose_losses.py --scenarios flyover --seeds 0 1 2
 
