@@ -52,7 +52,7 @@ from clusterfilter_ros.core.linking import (
     linking_reach,
 )
 from clusterfilter_ros.core.params import ParamSet, detector_params
-from clusterfilter_ros.core.preprocess import frame_points, points_at, usable_and_below_floor
+from clusterfilter_ros.core.preprocess import points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import score_pieces, split_and_score, split_still
 from clusterfilter_ros.core.trajectory import (
@@ -115,15 +115,12 @@ def global_cloud(frames: Iterable[Frame], params: ParamSet) -> GlobalCloud:
     keep_floor = _grows_below_floor(params)
     for frame in frames:
         stamps.append(frame.stamp)
-        if keep_floor:
-            usable, floor = usable_and_below_floor(frame, params)
-            xyz, t = points_at(frame, usable)
-            if floor.any():
-                fxyz, ft = points_at(frame, floor)
-                floor_xyzs.append(fxyz)
-                floor_ts.append(ft)
-        else:
-            xyz, t = frame_points(frame, params)
+        usable, floor = usable_and_below_floor(frame, params)
+        xyz, t = points_at(frame, usable)
+        if keep_floor and floor.any():
+            fxyz, ft = points_at(frame, floor)
+            floor_xyzs.append(fxyz)
+            floor_ts.append(ft)
         xyzs.append(xyz)
         ts.append(t)
         flags.append(np.full(t.size, frame.sensor in denoise))
@@ -459,10 +456,7 @@ def growth_only_points(
         transient = ~persistent_mask(fxyz, ft, params)
         parts_xyz.append(fxyz[transient])
         parts_t.append(ft[transient])
-    return (
-        _stack(parts_xyz, np.empty((0, 3), np.float32)).astype(np.float32, copy=False),
-        _stack(parts_t, np.empty(0)),
-    )
+    return _stack(parts_xyz, np.empty((0, 3), np.float32)), _stack(parts_t, np.empty(0))
 
 
 def _track_ends(

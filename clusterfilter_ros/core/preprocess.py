@@ -29,14 +29,9 @@ def usable_mask(frame: Frame, params: ParamSet) -> np.ndarray:
     return keep
 
 
-def below_floor_mask(frame: Frame, params: ParamSet) -> np.ndarray:
-    """(N,) bool: the rows :func:`frame_points` drops only for lying at or below
-    ``mid360_min_z`` (Mid360 frames; none for other sensors)."""
-    return usable_and_below_floor(frame, params)[1]
-
-
 def usable_and_below_floor(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray]:
-    """(:func:`usable_mask`, :func:`below_floor_mask`) with one range test."""
+    """(:func:`usable_mask`, the rows :func:`frame_points` drops only for lying at or
+    below ``mid360_min_z``: Mid360 frames, none for other sensors) with one range test."""
     in_range = _in_range(frame, params)
     if frame.sensor != MID360:
         return in_range, np.zeros(in_range.size, dtype=bool)
@@ -56,7 +51,7 @@ def frame_points(frame: Frame, params: ParamSet) -> tuple[np.ndarray, np.ndarray
 
 def points_at(frame: Frame, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(xyz float32 (N, 3), per-point time float64 (N,)) of the rows ``keep`` marks (a
-    mask from :func:`usable_mask` or :func:`below_floor_mask`)."""
+    mask from :func:`usable_mask` or :func:`usable_and_below_floor`)."""
     rows = np.flatnonzero(keep)  # take() by index is several times faster than a mask
     pts = frame.xyz.take(rows, axis=0)
     if frame.point_time is not None:

@@ -7,9 +7,9 @@ import numpy as np
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.preprocess import (
-    below_floor_mask,
     frame_points,
     points_at,
+    usable_and_below_floor,
     usable_mask,
 )
 
@@ -41,10 +41,11 @@ def test_usable_mask_drops_bad_padding_far_and_low_rows():
     assert not usable_mask(Frame(float("nan"), AVIA, xyz), params).any()
     # Below the floor: exactly the rows dropped for their height alone (the tiny one and
     # the low one), for the Mid360 only.
-    floor = below_floor_mask(Frame(1.0, MID360, xyz), params)
+    usable, floor = usable_and_below_floor(Frame(1.0, MID360, xyz), params)
     assert floor.tolist() == [a and not m for a, m in zip(expect_avia, expect_mid, strict=True)]
-    assert not below_floor_mask(Frame(1.0, AVIA, xyz), params).any()
-    assert not below_floor_mask(Frame(float("nan"), MID360, xyz), params).any()
+    assert usable.tolist() == expect_mid
+    assert not usable_and_below_floor(Frame(1.0, AVIA, xyz), params)[1].any()
+    assert not usable_and_below_floor(Frame(float("nan"), MID360, xyz), params)[1].any()
 
 
 def test_frame_points_applies_point_times_and_rejects_wild_offsets():
@@ -59,6 +60,6 @@ def test_frame_points_applies_point_times_and_rejects_wild_offsets():
 def test_points_at_gives_the_marked_rows_with_their_times():
     xyz = np.array([[10.0, 0.0, -1.0], [11.0, 0.0, 5.0], [12.0, 0.0, -2.0]], np.float32)
     frame = Frame(100.0, MID360, xyz, point_time=np.array([0.01, 0.02, 0.03]))
-    pts, t = points_at(frame, below_floor_mask(frame, detector_params()))
+    pts, t = points_at(frame, usable_and_below_floor(frame, detector_params())[1])
     assert pts.tolist() == [[10.0, 0.0, -1.0], [12.0, 0.0, -2.0]]
     assert np.allclose(t, [100.01, 100.03]) and t.dtype == np.float64
