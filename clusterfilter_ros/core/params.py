@@ -394,6 +394,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         minimum=0.0,
         maximum=600.0,
     ),
+    ParamSpec(
+        "report_lag",
+        "float",
+        0.0,
+        "Streaming: besides each frame's own estimate (from the data up to that frame), "
+        "report every frame's position again this many seconds of stream time later, from "
+        "the data up to then and the track's returns on both sides of the frame "
+        "(fixed-lag smoothing): a drone is then reported from its first returns, not from "
+        "the moment it is confirmed, and between returns the position is interpolated. "
+        "At most local_history; 0 = off.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
     # --- global clustering (paper 3.2) ---
     ParamSpec(
         "clustering",

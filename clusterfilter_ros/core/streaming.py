@@ -23,6 +23,13 @@ its tangent past the newest sample) over the track's last ``track_window`` secon
 least its last three samples) up to the end of the frame's scan, evaluated at the frame
 stamp, and reported while the newest sample is at most ``max_extrapolation`` old
 (``max_gap`` for a track slower than ``min_speed``).
+
+With ``report_lag`` > 0 each frame is estimated a second time once the stream has moved
+``report_lag`` seconds past it (:meth:`StreamingDetector.delayed`): from the track as it
+is then, whose samples reach back to the start of its cluster in the local history and
+forward past the frame, so a drone is reported from its first returns rather than from
+the re-clustering that confirmed it, and gaps between returns are interpolated, not
+extrapolated (fixed-lag smoothing; see :func:`smoothed_position`).
 """
 
 from __future__ import annotations
@@ -49,6 +56,10 @@ from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import split_and_score
 from clusterfilter_ros.core.trajectory import weighted_line
+
+#: Frames waiting for their report_lag estimate beyond this are estimated at once (a
+#: stream whose stamps stop advancing cannot grow the queue without bound).
+_MAX_LAGGED = 10000
 
 #: Parameters whose change invalidates the accumulated state (voxel keys, filtering).
 _STRUCTURAL = {
@@ -127,11 +138,18 @@ class StreamingDetector:
         self.frames_pushed = 0
         self.frames_rejected = 0
         self._executor: ThreadPoolExecutor | None = None
+        # report_lag: stamps of the frames still to be estimated again, and the delayed
+        # estimates made but not yet taken by delayed(). Both survive reset().
+        self._lagged: deque[float] = deque()
+        self._ready: list[Estimate] = []
         self.reset()
 
     # ------------------------------------------------------------------ public API
     def reset(self) -> None:
-        """Forget everything seen so far (counters of pushed/rejected frames are kept)."""
+        """Forget everything seen so far (counters of pushed/rejected frames are kept).
+        Frames still waiting for their delayed estimate get it from the state before the
+        reset; :meth:`delayed` returns them."""
+        self._release_delayed(math.inf)
         self._background = BackgroundGrid(self.params)
         self._static = np.empty(0, np.int64)  # sorted static voxel keys (last re-clustering)
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
@@ -234,8 +252,27 @@ class StreamingDetector:
         if not caught_up and xyz.shape[0] and self._track:
             self._extend_track(stamp, xyz, t)
         estimate = self._estimate(stamp)
+        lag = self.params.report_lag
+        if lag > 0:
+            self._lagged.append(stamp)
+        self._release_delayed(self._now - lag)
         self._last_push_ms = (time.perf_counter() - start) * 1e3
         return estimate
+
+    def delayed(self) -> list[Estimate]:
+        """The ``report_lag`` estimates made since the last call, oldest frame first:
+        after a push, those of the frames the stream has now passed by ``report_lag``
+        seconds (stream time, the stamps pushed). Each is the position at its frame's
+        stamp from all data up to the newest frame; frames with no drone there give none.
+        Empty while ``report_lag`` is 0."""
+        ready, self._ready = self._ready, []
+        return ready
+
+    def flush(self) -> list[Estimate]:
+        """End of a stream: the delayed estimates of every frame still waiting for
+        ``report_lag`` to pass, from the data so far, with those not yet taken."""
+        self._release_delayed(math.inf)
+        return self.delayed()
 
     def drone_points(self) -> np.ndarray:
         """(M, 3) float32 points of the selected cluster within the last track_window s."""
@@ -269,6 +306,7 @@ class StreamingDetector:
             "last_push_ms": self._last_push_ms,
             "frames_pushed": float(self.frames_pushed),
             "frames_rejected": float(self.frames_rejected),
+            "delayed_pending": float(len(self._lagged)),
         }
 
     # ------------------------------------------------------------------ internals
@@ -547,6 +585,32 @@ class StreamingDetector:
                 _TrackSample(float(t[near].mean()), group.mean(axis=0, dtype=np.float64), group)
             )
 
+    def _release_delayed(self, until: float) -> None:
+        """Make the delayed estimates of the waiting frames stamped at or before ``until``
+        (and of the oldest ones beyond ``_MAX_LAGGED`` waiting frames)."""
+        lagged = self._lagged
+        while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
+            estimate = self._delayed_estimate(lagged.popleft())
+            if estimate is not None:
+                self._ready.append(estimate)
+
+    def _delayed_estimate(self, stamp: float) -> Estimate | None:
+        """The position at ``stamp`` from the current track's samples on both sides of it
+        (:func:`smoothed_position`), while the track is confident."""
+        p = self.params
+        if not self._track or self._selected_conf < p.min_confidence:
+            return None
+        track = sorted(self._track, key=lambda s: s.t)
+        ts = np.array([s.t for s in track])
+        ws = np.array([float(s.points.shape[0]) for s in track])
+        position = smoothed_position(ts, np.array([s.position for s in track]), ws, stamp, p)
+        if position is None:
+            return None
+        n = int(ws[np.abs(ts - stamp) <= p.track_window].sum())
+        if n < p.min_points:
+            return None
+        return Estimate(stamp, reported_positions(position, p)[0], self._selected_conf, n)
+
     def _estimate(self, stamp: float) -> Estimate | None:
         p = self.params
         if not self._track or self._selected_conf < p.min_confidence:
@@ -717,12 +781,68 @@ def _hovering_track(
     return None
 
 
+def smoothed_position(
+    ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, stamp: float, params: ParamSet
+) -> np.ndarray | None:
+    """Position at ``stamp`` from track samples (times ``ts`` ascending, positions ``ps``
+    (S, 3), point counts ``ws``) on both sides of it, or None where the samples do not
+    support one.
+
+    Supported: within ``max_gap`` seconds between two samples, or up to
+    ``max_extrapolation`` seconds before the first or after the last sample on that side
+    of a longer gap. The fit uses the samples within ``track_window`` seconds of ``stamp``
+    (at least the four nearest within ``link_max_gap``, so that a sparse track is not read
+    as standing still): a weighted quadratic where ``stamp`` lies among at least 6 samples
+    spanning 0.6 s and the fitted acceleration is at most ``max_accel``, else a weighted
+    straight line (no velocity over less than two frame periods)."""
+    p = params
+    n = ts.size
+    if n == 0 or not ts[0] - p.max_extrapolation <= stamp <= ts[-1] + p.max_extrapolation:
+        return None
+    k = int(np.searchsorted(ts, stamp))
+    if 0 < k < n and ts[k] - ts[k - 1] > p.max_gap:
+        # Inside a gap too long to bridge: only near one of its ends, from that side.
+        if stamp - ts[k - 1] <= p.max_extrapolation:
+            ts, ps, ws = ts[:k], ps[:k], ws[:k]
+        elif ts[k] - stamp <= p.max_extrapolation:
+            ts, ps, ws = ts[k:], ps[k:], ws[k:]
+        else:
+            return None
+    dist = np.abs(ts - stamp)
+    near = dist <= p.track_window
+    if np.count_nonzero(near) < 4:
+        near = np.zeros(ts.size, dtype=bool)
+        near[np.argsort(dist, kind="stable")[:4]] = True
+        near &= dist <= max(p.track_window, p.link_max_gap)
+    tt, pp, ww = ts[near], ps[near], ws[near]
+    if tt.size >= 6 and tt[-1] - tt[0] >= 0.6 and tt[0] <= stamp <= tt[-1]:
+        tc = float(np.average(tt, weights=ww))
+        dt = tt - tc
+        sw = np.sqrt(ww)[:, None]
+        design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1) * sw
+        coef = np.linalg.lstsq(design, pp * sw, rcond=None)[0]
+        if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
+            x = stamp - tc
+            return coef[0] + coef[1] * x + coef[2] * x * x
+    slope, mean, tc = weighted_line(tt, pp, ww)
+    if tt[-1] - tt[0] < 2 * p.frame_period:
+        slope = np.zeros(3)
+    return mean + slope * (stamp - tc)
+
+
 def run_streaming(frames: Iterable[Frame], params: ParamSet | None = None) -> list[Estimate]:
-    """Push every frame through one :class:`StreamingDetector`; the estimates in order."""
+    """Push every frame through one :class:`StreamingDetector`; the estimates in order:
+    each frame's own, or with ``report_lag`` > 0 the delayed ones (the last frames'
+    flushed at the end)."""
     detector = StreamingDetector(params)
+    lagged = detector.params.report_lag > 0
     out = []
     for frame in frames:
         est = detector.push(frame)
-        if est is not None:
+        if lagged:
+            out.extend(detector.delayed())
+        elif est is not None:
             out.append(est)
+    if lagged:
+        out.extend(detector.flush())
     return out

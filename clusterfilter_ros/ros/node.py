@@ -13,6 +13,10 @@ Outputs (reliable QoS, depth 10):
 
 - ``/uav/pose`` ``geometry_msgs/PoseStamped``: stamp = time of the frame the estimate
   is for, ``frame_id`` parameter, identity orientation; nothing when no drone is found;
+- ``/uav/pose_delayed`` ``geometry_msgs/PoseStamped``: with ``report_lag`` > 0, each
+  frame's position again, ``report_lag`` seconds of stream time later, from the data up
+  to then (fixed-lag smoothing; stamp = the frame's). When input stops, the frames still
+  waiting are estimated after ``report_lag`` seconds (at least one) of wall time;
 - ``/uav/points`` ``sensor_msgs/PointCloud2``: the points the detector attributes to
   the drone (built only while someone subscribes);
 - ``/uav/path`` ``nav_msgs/Path``: the last ``path_length`` poses (built only while
@@ -74,6 +78,7 @@ from clusterfilter_ros.ros.transforms import Extrinsic
 
 NODE_NAME = "clusterfilter_detector"
 POSE_TOPIC = "/uav/pose"
+DELAYED_POSE_TOPIC = "/uav/pose_delayed"
 POINTS_TOPIC = "/uav/points"
 PATH_TOPIC = "/uav/path"
 DIAGNOSTICS_TOPIC = "/diagnostics"
@@ -232,6 +237,9 @@ class DetectorNode(Node):
         self._last_error = ""
 
         self._pose_pub = self.create_publisher(PoseStamped, POSE_TOPIC, OUTPUT_QOS)
+        self._delayed_pub = self.create_publisher(PoseStamped, DELAYED_POSE_TOPIC, OUTPUT_QOS)
+        self._delayed_estimates = 0
+        self._last_processed_at = time.monotonic()
         self._points_pub = self.create_publisher(PointCloud2, POINTS_TOPIC, OUTPUT_QOS)
         self._path_pub = self.create_publisher(PathMsg, PATH_TOPIC, OUTPUT_QOS)
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, OUTPUT_QOS)
@@ -377,6 +385,7 @@ class DetectorNode(Node):
                     self._path.clear()
             try:
                 estimate = self._detector.push(item.frame)
+                delayed = self._detector.delayed()
                 if estimate is not None and self._points_pub.get_subscription_count() > 0:
                     points = self._detector.drone_points()
             except Exception as exc:  # a detector failure is reported, never fatal
@@ -393,20 +402,49 @@ class DetectorNode(Node):
         processing_s = time.perf_counter() - started
         if estimate is not None and np.all(np.isfinite(estimate.position)):
             self._publish_estimate(estimate, points)
+        self._publish_delayed(delayed)
         latency_s = time.monotonic() - item.received_at
         with self._cond:
+            self._last_processed_at = time.monotonic()
             self._processed += 1
             self._period.processing_s.append(processing_s)
             self._period.latency_s.append(latency_s)
 
-    def _publish_estimate(self, estimate: Any, points: np.ndarray | None) -> None:
-        frame_id = self._values["frame_id"]
+    def _pose(self, estimate: Any) -> PoseStamped:
         pose = PoseStamped()
         pose.header.stamp = seconds_to_time_msg(estimate.stamp)
-        pose.header.frame_id = frame_id
+        pose.header.frame_id = self._values["frame_id"]
         x, y, z = (float(v) for v in estimate.position)
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = x, y, z
         pose.pose.orientation.w = 1.0
+        return pose
+
+    def _publish_delayed(self, estimates: list[Any]) -> None:
+        """Publish ``report_lag`` estimates on ``/uav/pose_delayed``."""
+        for estimate in estimates:
+            if np.all(np.isfinite(estimate.position)):
+                self._delayed_pub.publish(self._pose(estimate))
+                with self._cond:
+                    self._delayed_estimates += 1
+
+    def _flush_delayed_if_idle(self) -> None:
+        """The input stopped: estimate the frames still waiting for ``report_lag`` once
+        no frame was processed for ``report_lag`` (at least 1) seconds of wall time."""
+        with self._cond:
+            idle = time.monotonic() - self._last_processed_at
+            if self._busy or len(self._merger):
+                return
+        with self._detector_lock:
+            if idle < max(float(self._detector.params.report_lag), 1.0):
+                return
+            if not self._detector.stats()["delayed_pending"]:
+                return
+            estimates = self._detector.flush()
+        self._publish_delayed(estimates)
+
+    def _publish_estimate(self, estimate: Any, points: np.ndarray | None) -> None:
+        frame_id = self._values["frame_id"]
+        pose = self._pose(estimate)
         self._pose_pub.publish(pose)
         with self._cond:
             self._estimates += 1
@@ -496,6 +534,7 @@ class DetectorNode(Node):
 
     # --------------------------------------------------------------- diagnostics
     def _publish_diagnostics(self) -> None:
+        self._flush_delayed_if_idle()
         self._diag_pub.publish(self.diagnostics())
 
     def diagnostics(self) -> DiagnosticArray:
@@ -607,6 +646,7 @@ class DetectorNode(Node):
                 "lost": {s: st.lost for s, st in self._inputs.items()},
                 "processed": self._processed,
                 "estimates": self._estimates,
+                "delayed_estimates": self._delayed_estimates,
                 "errors": self._errors,
                 "queued": len(self._merger),
                 "dropped_late": counts.late,

@@ -85,6 +85,13 @@ def test_timestamps_and_params(recordings, tmp_path):
     args = ["detect", str(recordings / "mmaud" / "flight"), "-o", str(stream_out), "--quiet"]
     assert main([*args, "--mode", "stream", "--timestamps", str(stamps)]) == 0
     assert read_positions_csv(stream_out).stamps.tolist() == [1006.5]  # 1001 is in warm-up
+    # With report_lag each frame is estimated again 3 s later, from the returns on both
+    # sides of it: the warm-up's frames too, once the track is confirmed.
+    lagged = ["--mode", "stream", "--timestamps", str(stamps), "--param", "report_lag=3.0"]
+    assert main([*args, *lagged]) == 0
+    pred = read_positions_csv(stream_out)
+    assert pred.stamps.tolist() == [1001.0, 1006.5]
+    assert np.all(np.linalg.norm(pred.xyz - scenes.drone_path(pred.stamps - 1000.0), axis=1) < 0.5)
 
 
 def test_drone_free_evaluation_and_user_errors(recordings, tmp_path, capsys):

@@ -94,6 +94,31 @@ def test_node_with_background_reclustering_tracks_like_run_streaming(
     assert np.median(diff) < 0.05 and np.mean(diff < 0.5) >= 0.95
 
 
+def test_delayed_poses_equal_run_streaming_with_report_lag(make_rig, small_sequence, wait_for):
+    from clusterfilter_ros.ros.node import DELAYED_POSE_TOPIC
+    from clusterfilter_ros.ros.record import PoseRecorder
+
+    frames = small_sequence.frames
+    params = detector_params({"report_lag": 2.0})
+    expected = run_streaming(on_the_wire(frames), params)
+    assert len(expected) > 50
+    rig = make_rig(qos_depth=1000, max_queue=1000, sync_timeout=1.0, report_lag=2.0)
+    delayed = PoseRecorder(rig.client, pose_topic=DELAYED_POSE_TOPIC)
+    replay_and_wait(rig, frames, len(frames), wait_for)
+    # The last report_lag seconds of frames are estimated once the input has been quiet
+    # for report_lag seconds of wall time.
+    assert wait_for(lambda: len(delayed) >= len(expected), 20.0), (len(delayed), len(expected))
+    got = delayed.positions()
+    assert len(got) == len(expected)
+    np.testing.assert_array_equal(got.xyz, np.array([e.position for e in expected]))
+    np.testing.assert_allclose(got.stamps, [e.stamp for e in expected], rtol=0, atol=1e-9)
+    assert rig.detector.counters()["delayed_estimates"] == len(expected)
+    # The live topic is unchanged by report_lag.
+    live = run_streaming(on_the_wire(frames), detector_params())
+    assert wait_for(lambda: len(rig.recorder) >= len(live), 10.0)
+    np.testing.assert_array_equal(rig.recorder.positions().xyz, [e.position for e in live])
+
+
 def test_extrinsic_moves_poses(make_rig, small_sequence, wait_for):
     frames = small_sequence.frames
     shift = [5.0, -3.0, 1.0]
