@@ -6,7 +6,7 @@ prism offset as ``target_offset``, and evaluates against the total-station groun
 detection rate over the time the drone gives at least one lidar return within +-0.5 s
 ("observable"), RMSE, coverage; on drone-free scenarios the false-alarm fraction.
 Mode ``delayed`` is the streaming detector's ``report_lag`` output (``--report-lag``
-seconds, default 2): every frame estimated again once the stream has moved that far on.
+seconds, default 3): every frame estimated again once the stream has moved that far on.
 
     .venv/bin/python benchmarks/detector_accuracy.py --seeds 100 101 102 --markdown
 
@@ -119,7 +119,7 @@ def evaluate_on_sim(sim, pred: TimedPositions):
 
 
 def run_case(
-    sim, mode: str, values: dict, plot: Path | None = None, report_lag: float = 2.0
+    sim, mode: str, values: dict, plot: Path | None = None, report_lag: float = 3.0
 ) -> tuple[dict, TimedPositions, float]:
     """One run: ``mode`` offline, stream or delayed (stream with ``report_lag``)."""
     if mode == "delayed":
@@ -164,7 +164,7 @@ def main(argv=None) -> int:
         choices=("offline", "stream", "delayed"),
         default=["offline", "stream"],
     )
-    ap.add_argument("--report-lag", type=float, default=2.0, help="report_lag (s) of mode delayed")
+    ap.add_argument("--report-lag", type=float, default=3.0, help="report_lag (s) of mode delayed")
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument(
         "--preset",

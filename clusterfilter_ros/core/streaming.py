@@ -139,9 +139,11 @@ class StreamingDetector:
         self.frames_rejected = 0
         self._executor: ThreadPoolExecutor | None = None
         # report_lag: stamps of the frames still to be estimated again, and the delayed
-        # estimates made but not yet taken by delayed(). Both survive reset().
+        # estimates made but not yet taken by delayed() (the newest _MAX_LAGGED). Both
+        # survive reset().
         self._lagged: deque[float] = deque()
-        self._ready: list[Estimate] = []
+        self._ready: deque[Estimate] = deque(maxlen=_MAX_LAGGED)
+        self.delayed_dropped = 0
         self.reset()
 
     # ------------------------------------------------------------------ public API
@@ -171,6 +173,7 @@ class StreamingDetector:
         self._clusters = 0
         self._foreground_points = 0
         self._jump_candidate: float | None = None
+        self._last_live = -math.inf  # stamp of the newest estimate push() returned
         # (newest sample time, position there, velocity) of the last reported track.
         self._last_reported: tuple[float, np.ndarray, np.ndarray] | None = None
 
@@ -252,6 +255,8 @@ class StreamingDetector:
         if not caught_up and xyz.shape[0] and self._track:
             self._extend_track(stamp, xyz, t)
         estimate = self._estimate(stamp)
+        if estimate is not None:
+            self._last_live = max(self._last_live, stamp)
         lag = self.params.report_lag
         if lag > 0:
             self._lagged.append(stamp)
@@ -264,8 +269,10 @@ class StreamingDetector:
         after a push, those of the frames the stream has now passed by ``report_lag``
         seconds (stream time, the stamps pushed). Each is the position at its frame's
         stamp from all data up to the newest frame; frames with no drone there give none.
-        Empty while ``report_lag`` is 0."""
-        ready, self._ready = self._ready, []
+        Empty while ``report_lag`` is 0. Only the newest ``_MAX_LAGGED`` (10,000) are
+        kept between calls; older ones are counted in ``delayed_dropped``."""
+        ready = list(self._ready)
+        self._ready.clear()
         return ready
 
     def flush(self) -> list[Estimate]:
@@ -307,6 +314,7 @@ class StreamingDetector:
             "frames_pushed": float(self.frames_pushed),
             "frames_rejected": float(self.frames_rejected),
             "delayed_pending": float(len(self._lagged)),
+            "delayed_dropped": float(self.delayed_dropped),
         }
 
     # ------------------------------------------------------------------ internals
@@ -592,13 +600,16 @@ class StreamingDetector:
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             estimate = self._delayed_estimate(lagged.popleft())
             if estimate is not None:
+                self.delayed_dropped += len(self._ready) == self._ready.maxlen
                 self._ready.append(estimate)
 
     def _delayed_estimate(self, stamp: float) -> Estimate | None:
         """The position at ``stamp`` from the current track's samples on both sides of it
-        (:func:`smoothed_position`), while the track is confident."""
+        (:func:`smoothed_position`), while the track is confident and push() has returned
+        an estimate since ``stamp``: an object confirmed only after its returns had
+        stopped (so never reported by push) is not reported late either."""
         p = self.params
-        if not self._track or self._selected_conf < p.min_confidence:
+        if not self._track or self._selected_conf < p.min_confidence or self._last_live < stamp:
             return None
         track = sorted(self._track, key=lambda s: s.t)
         ts = np.array([s.t for s in track])

@@ -430,12 +430,11 @@ class DetectorNode(Node):
     def _flush_delayed_if_idle(self) -> None:
         """The input stopped: estimate the frames still waiting for ``report_lag`` once
         no frame was processed for ``report_lag`` (at least 1) seconds of wall time."""
-        with self._cond:
-            idle = time.monotonic() - self._last_processed_at
-            if self._busy or len(self._merger):
-                return
         with self._detector_lock:
-            if idle < max(float(self._detector.params.report_lag), 1.0):
+            with self._cond:
+                idle = time.monotonic() - self._last_processed_at
+                busy = self._busy or len(self._merger) > 0
+            if busy or idle < max(float(self._detector.params.report_lag), 1.0):
                 return
             if not self._detector.stats()["delayed_pending"]:
                 return

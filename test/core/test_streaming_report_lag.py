@@ -52,6 +52,32 @@ def test_delayed_estimates_cover_the_warm_up_and_follow_the_drone(scene, drone_p
     assert all(0.5 <= e.confidence <= 1 and e.n_points >= 1 for e in delayed)
 
 
+def test_nothing_is_reported_late_after_the_newest_live_estimate(scene):
+    # The drone's returns stop at 6 s; the stream goes on to 10 s.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1006.0 else f for f in frames]
+    det = StreamingDetector(detector_params({"report_lag": LAG}))
+    live, delayed, _ = _push_all(frames, det)
+    delayed += det.flush()
+    last_live = max(e.stamp for e in live)
+    assert 1006.0 <= last_live <= 1006.0 + det.params.max_extrapolation + 0.11
+    assert delayed and max(e.stamp for e in delayed) <= last_live
+
+
+def test_an_object_confirmed_only_after_its_returns_stopped_is_not_reported_late(scene):
+    # The drone's returns stop at 4 s, and the warm-up (no re-clustering) lasts until
+    # 4.6 s: the first re-clustering finds its track already 0.6 s old, too old for
+    # push() to report (max_extrapolation 0.5 s), so the delayed output stays silent too.
+    frames, _, _ = scene(duration=8.0, wall_points=200, drone_points=3)
+    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1004.0 else f for f in frames]
+    values = {"report_lag": 3.0, "warmup": 4.6}
+    det = StreamingDetector(detector_params(values))
+    live, delayed, _ = _push_all(frames, det)
+    assert live == [] and delayed + det.flush() == []
+    # It was selected, confidently: only the rule above keeps it out.
+    assert det.stats()["reclusters"] > 0
+
+
 def test_live_estimates_do_not_depend_on_report_lag(scene):
     frames, _, _ = scene(duration=7.0, wall_points=200)
     base = run_streaming(frames)
@@ -102,6 +128,17 @@ def test_the_waiting_queue_is_bounded(monkeypatch):
     for _ in range(20):  # a stream whose stamps stop advancing
         det.push(Frame(1000.0, MID360, xyz))
     assert det.stats()["delayed_pending"] == 5
+
+
+def test_delayed_estimates_nobody_takes_are_bounded(scene, monkeypatch):
+    monkeypatch.setattr(streaming, "_MAX_LAGGED", 7)
+    frames, _, _ = scene(duration=7.0, wall_points=200)
+    det = StreamingDetector(detector_params({"report_lag": LAG}))
+    for f in frames:  # push() only, delayed() never called
+        det.push(f)
+    made = det.flush()
+    assert len(made) == 7 and det.stats()["delayed_dropped"] > 0
+    assert made[-1].stamp == frames[-1].stamp
 
 
 # --------------------------------------------------------------- smoothed_position
