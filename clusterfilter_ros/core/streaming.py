@@ -55,7 +55,7 @@ from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import split_and_score
-from clusterfilter_ros.core.trajectory import weighted_line
+from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
 
 #: Frames waiting for their report_lag estimate beyond this are estimated at once (a
 #: stream whose stamps stop advancing cannot grow the queue without bound).
@@ -557,10 +557,7 @@ class StreamingDetector:
             # of speed without the straight line's lag, unless its acceleration is
             # implausible. Beyond the newest sample it goes on along its tangent: the
             # curvature of a second of noisy samples is not extrapolated.
-            dt = ts - tc
-            sw = np.sqrt(ws)[:, None]
-            design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1) * sw
-            coef = np.linalg.lstsq(design, ps * sw, rcond=None)[0]
+            coef = weighted_quadratic(ts - tc, ps, ws)
             if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
                 x = stamp - tc
                 x_last = min(x, ts[-1] - tc)
@@ -828,10 +825,7 @@ def smoothed_position(
     tt, pp, ww = ts[near], ps[near], ws[near]
     if tt.size >= 6 and tt[-1] - tt[0] >= 0.6 and tt[0] <= stamp <= tt[-1]:
         tc = float(np.average(tt, weights=ww))
-        dt = tt - tc
-        sw = np.sqrt(ww)[:, None]
-        design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1) * sw
-        coef = np.linalg.lstsq(design, pp * sw, rcond=None)[0]
+        coef = weighted_quadratic(tt - tc, pp, ww)
         if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
             x = stamp - tc
             return coef[0] + coef[1] * x + coef[2] * x * x

@@ -57,6 +57,15 @@ def weighted_line(
     return slope, mean, tc
 
 
+def weighted_quadratic(dt: np.ndarray, xyz: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted least-squares quadratic through samples (time offsets dt (S,), xyz (S, 3),
+    weights (S,)): (3, 3) coefficients, the position at offset ``x`` being
+    ``c[0] + c[1] * x + c[2] * x * x`` (so the acceleration is ``2 * c[2]``)."""
+    sw = np.sqrt(w)[:, None]
+    design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1) * sw
+    return np.linalg.lstsq(design, xyz * sw, rcond=None)[0]
+
+
 @dataclass
 class _Segment:
     t_start: float
