@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from clusterfilter_ros.core.trajectory import fit_trajectory, time_samples, weighted_line
+from clusterfilter_ros.core.trajectory import (
+    fit_trajectory,
+    time_samples,
+    weighted_line,
+    weighted_quadratic,
+)
 
 
 def test_time_samples_average_per_bin():
@@ -176,3 +181,17 @@ def test_returns_off_the_track_heading_end_no_segment():
         heading(inside) - np.column_stack([8 * inside, 0 * inside, 20 + 0 * inside]), axis=1
     )
     assert err.max() < 0.3
+
+
+def test_weighted_quadratic_recovers_a_parabola_whatever_the_weights():
+    dt = np.linspace(-1.0, 1.0, 9)
+    coef_true = np.array([[1.0, -2.0, 3.0], [0.5, 0.0, -1.0], [1.5, 0.25, 0.0]])
+    xyz = coef_true[0] + dt[:, None] * coef_true[1] + (dt * dt)[:, None] * coef_true[2]
+    w = np.arange(1.0, 10.0)
+    np.testing.assert_allclose(weighted_quadratic(dt, xyz, w), coef_true, atol=1e-12)
+    # A heavier sample pulls a noisy fit towards itself.
+    noisy = xyz.copy()
+    noisy[4] += 1.0
+    light = weighted_quadratic(dt, noisy, np.ones(9))
+    heavy = weighted_quadratic(dt, noisy, np.where(np.arange(9) == 4, 100.0, 1.0))
+    assert heavy[0, 0] - coef_true[0, 0] > light[0, 0] - coef_true[0, 0] > 0
