@@ -19,7 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="detect the drone in a recording and write its positions (CSV or UG2+ format)",
         description="Run the cluster-filter detector on a challenge sequence folder or a bag. "
         "--mode offline is the paper's whole-sequence method; --mode stream pushes frames "
-        "one at a time exactly like the ROS node. Writes timestamp,x,y,z,confidence,points "
+        "one at a time exactly like the ROS node (with --param report_lag=L, its "
+        "/uav/pose_delayed output: every frame estimated again L seconds later). Writes timestamp,x,y,z,confidence,points "
         "rows only where a drone is believed present.",
     )
     p.add_argument("input", metavar="INPUT", help="sequence folder, .bag file or ROS 2 bag")
