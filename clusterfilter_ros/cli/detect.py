@@ -20,8 +20,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Run the cluster-filter detector on a challenge sequence folder or a bag. "
         "--mode offline is the paper's whole-sequence method; --mode stream pushes frames "
         "one at a time exactly like the ROS node (with --param report_lag=L, its "
-        "/uav/pose_delayed output: every frame estimated again L seconds later). Writes timestamp,x,y,z,confidence,points "
-        "rows only where a drone is believed present.",
+        "/uav/pose_delayed output: every frame estimated again L seconds later). Writes "
+        "timestamp,x,y,z,confidence,points rows only where a drone is believed present.",
     )
     p.add_argument("input", metavar="INPUT", help="sequence folder, .bag file or ROS 2 bag")
     p.add_argument("--mode", choices=("stream", "offline"), default="offline")
