@@ -6,7 +6,8 @@ duplicate, out-of-order, backwards-jumping, NaN/Inf and huge stamps, unknown sen
 names and a small moving blob (so that the clustering, scoring and track paths run on
 the same garbage). Every push must return None or a finite :class:`Estimate` for the
 frame's stamp, without raising or emitting numpy RuntimeWarnings, and the state must
-stay within its caps. A separate test pushes a 2-million-point frame.
+stay within its caps; with ``report_lag`` (and no warm-up, so that garbage reaches the
+estimates at all) every late estimate is finite and for a frame that was pushed. A separate test pushes a 2-million-point frame.
 
 Example counts and the 2M-point timing are printed to the terminal (also without -s).
 """
@@ -31,7 +32,7 @@ from clusterfilter_ros.core.streaming import StreamingDetector
 EXAMPLES = int(os.environ.get("CLUSTERFILTER_FUZZ_EXAMPLES", "200"))
 SPECIAL = [math.nan, math.inf, -math.inf, 3.4e38, -3.4e38, 1e-45, 0.0, 1e7]
 STAMP_KINDS = ["next", "next", "next", "same", "back-small", "back-big", "forward-big", "special"]
-_seen = {"streams": 0, "frames": 0, "estimates": 0, "rejected": 0}
+_seen = {"streams": 0, "frames": 0, "estimates": 0, "rejected": 0, "late": 0}
 
 
 @st.composite
@@ -88,6 +89,13 @@ def frame_streams(draw: st.DrawFn) -> tuple[list[Frame], dict]:
                 {"recluster_period": 0.0},  # cluster + score after every frame
                 {"recluster_period": 0.0, "min_support_frames": 1, "min_confidence": 0.0},
                 {"denoise_sensors": ["avia", "mid360"], "recluster_period": 0.2},
+                {
+                    "recluster_period": 0.0,
+                    "min_support_frames": 1,
+                    "min_confidence": 0.0,
+                    "report_lag": 0.3,
+                    "warmup": 0.0,
+                },  # late estimates from the same garbage
             ]
         )
     )
@@ -104,6 +112,7 @@ def _property_push_never_raises(stream: tuple[list[Frame], dict]) -> None:
     frames, overrides = stream
     params = detector_params(overrides)
     det = StreamingDetector(params)
+    late = []
     _seen["streams"] += 1
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a RuntimeWarning per frame would flood a node's log
@@ -116,6 +125,8 @@ def _property_push_never_raises(stream: tuple[list[Frame], dict]) -> None:
                 assert estimate.stamp == frame.stamp
                 assert np.isfinite(estimate.position).all() and estimate.position.shape == (3,)
                 assert 0.0 <= estimate.confidence <= 1.0 and estimate.n_points >= 1
+            late.extend(det.delayed())
+        late.extend(det.flush())
         stats = det.stats()
         points = det.drone_points()
     _seen["rejected"] += int(stats["frames_rejected"])
@@ -123,6 +134,13 @@ def _property_push_never_raises(stream: tuple[list[Frame], dict]) -> None:
     assert stats["local_points"] <= params.max_local_points
     assert stats["accumulator_voxels"] <= params.max_accumulator_voxels
     assert points.ndim == 2 and points.shape[1] == 3 and np.isfinite(points).all()
+    # Late estimates: finite, each for a frame that was pushed, none left waiting.
+    pushed = {f.stamp for f in frames}
+    assert stats["delayed_pending"] == 0
+    for estimate in late:
+        assert estimate.stamp in pushed and np.isfinite(estimate.position).all()
+        assert 0.0 <= estimate.confidence <= 1.0 and estimate.n_points >= 1
+    _seen["late"] += len(late)
 
 
 def test_push_never_raises_on_any_frame(capsys: pytest.CaptureFixture[str]) -> None:
@@ -133,7 +151,7 @@ def test_push_never_raises_on_any_frame(capsys: pytest.CaptureFixture[str]) -> N
         print(
             f"\n[fuzz] StreamingDetector.push: {got['streams']} random streams, "
             f"{got['frames']} frames pushed, {got['rejected']} rejected by the detector, "
-            f"{got['estimates']} estimates (all finite)"
+            f"{got['estimates']} estimates and {got['late']} late ones (all finite)"
         )
     assert got["streams"] >= min(EXAMPLES, 100) and got["frames"] > got["streams"]
 
