@@ -403,7 +403,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "the data up to then and the track's returns on both sides of the frame "
         "(fixed-lag smoothing): a drone is then reported from its first returns, not from "
         "the moment it is confirmed, and between returns the position is interpolated. "
-        "At most local_history; 0 = off.",
+        "Up to local_history (the track's returns reach no further back); 0 = off.",
         minimum=0.0,
         maximum=60.0,
     ),
