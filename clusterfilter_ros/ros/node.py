@@ -438,7 +438,17 @@ class DetectorNode(Node):
                 return
             if not self._detector.stats()["delayed_pending"]:
                 return
-            estimates = self._detector.flush()
+            try:
+                estimates = self._detector.flush()
+            except Exception as exc:  # reported, never fatal (as in _process)
+                with self._cond:
+                    self._errors += 1
+                    self._last_error = f"{type(exc).__name__}: {exc}"
+                self.get_logger().error(
+                    f"detector failed on its delayed estimates: {type(exc).__name__}: {exc}",
+                    throttle_duration_sec=5.0,
+                )
+                return
         self._publish_delayed(estimates)
 
     def _publish_estimate(self, estimate: Any, points: np.ndarray | None) -> None:

@@ -7,7 +7,8 @@ names and a small moving blob (so that the clustering, scoring and track paths r
 the same garbage). Every push must return None or a finite :class:`Estimate` for the
 frame's stamp, without raising or emitting numpy RuntimeWarnings, and the state must
 stay within its caps; with ``report_lag`` (and no warm-up, so that garbage reaches the
-estimates at all) every late estimate is finite and for a frame that was pushed. A separate test pushes a 2-million-point frame.
+estimates at all) every late estimate is finite and for a frame that was pushed. A
+separate test pushes a 2-million-point frame.
 
 Example counts and the 2M-point timing are printed to the terminal (also without -s).
 """

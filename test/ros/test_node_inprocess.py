@@ -119,6 +119,26 @@ def test_delayed_poses_equal_run_streaming_with_report_lag(make_rig, small_seque
     np.testing.assert_array_equal(rig.recorder.positions().xyz, [e.position for e in live])
 
 
+def test_a_failing_delayed_flush_is_counted_not_fatal(make_rig, small_sequence, monkeypatch):
+    rig = make_rig(report_lag=2.0)
+    node = rig.detector
+    with node._cond:  # not idle: the diagnostics timer must not flush meanwhile
+        node._last_processed_at = time.monotonic() + 100.0
+    with node._detector_lock:
+        node._detector.push(small_sequence.frames[0])
+    assert node._detector.stats()["delayed_pending"] == 1
+
+    def boom():
+        raise RuntimeError("injected")
+
+    monkeypatch.setattr(node._detector, "flush", boom)
+    with node._cond:
+        node._last_processed_at = time.monotonic() - 10.0  # the input stopped 10 s ago
+    node._flush_delayed_if_idle()  # (the timer may have tried too)
+    assert node.counters()["errors"] >= 1
+    assert node.diagnostics() is not None  # still serving
+
+
 def test_extrinsic_moves_poses(make_rig, small_sequence, wait_for):
     frames = small_sequence.frames
     shift = [5.0, -3.0, 1.0]
