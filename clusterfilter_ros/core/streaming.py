@@ -822,6 +822,8 @@ def smoothed_position(
         near = np.zeros(ts.size, dtype=bool)
         near[np.argsort(dist, kind="stable")[:4]] = True
         near &= dist <= max(p.track_window, p.link_max_gap)
+        if not near.any():  # only with max_extrapolation beyond both of those
+            return None
     tt, pp, ww = ts[near], ps[near], ws[near]
     if tt.size >= 6 and tt[-1] - tt[0] >= 0.6 and tt[0] <= stamp <= tt[-1]:
         tc = float(np.average(tt, weights=ww))

@@ -197,3 +197,11 @@ def test_an_implausible_curvature_falls_back_to_a_line():
     got = smoothed_position(ts, ps, np.ones(ts.size), 1.0, P)
     # A line through the samples within 1 s: not the exact quadratic value.
     assert abs(got[0] - 0.5 * accel) > 0.5
+
+
+def test_no_sample_within_reach_gives_none_not_an_error():
+    # max_extrapolation set beyond track_window and link_max_gap: 3 s past the last
+    # sample is "supported", but no sample is near enough to fit.
+    params = detector_params({"max_extrapolation": 5.0, "track_window": 0.5, "link_max_gap": 1.0})
+    ts = np.arange(0.0, 2.0, 0.1)
+    assert smoothed_position(ts, _line(ts), np.ones(ts.size), 5.0, params) is None
