@@ -362,13 +362,7 @@ class DetectorNode(Node):
                     try:
                         self._process(item)
                     except Exception as exc:  # e.g. publishing while shutting down
-                        with self._cond:
-                            self._errors += 1
-                            self._last_error = f"{type(exc).__name__}: {exc}"
-                        self.get_logger().error(
-                            f"could not handle a frame: {type(exc).__name__}: {exc}",
-                            throttle_duration_sec=5.0,
-                        )
+                        self._report_error("could not handle a frame", exc)
             finally:
                 with self._cond:
                     self._busy = False
@@ -389,14 +383,10 @@ class DetectorNode(Node):
                 if estimate is not None and self._points_pub.get_subscription_count() > 0:
                     points = self._detector.drone_points()
             except Exception as exc:  # a detector failure is reported, never fatal
-                with self._cond:
-                    self._errors += 1
-                    self._period.errors += 1
-                    self._last_error = f"{type(exc).__name__}: {exc}"
-                self.get_logger().error(
-                    f"detector failed on the {item.frame.sensor} frame at "
-                    f"{item.frame.stamp:.3f} s: {type(exc).__name__}: {exc}",
-                    throttle_duration_sec=5.0,
+                self._report_error(
+                    f"detector failed on the {item.frame.sensor} frame at {item.frame.stamp:.3f} s",
+                    exc,
+                    in_period=True,
                 )
                 return
         processing_s = time.perf_counter() - started
@@ -441,15 +431,19 @@ class DetectorNode(Node):
             try:
                 estimates = self._detector.flush()
             except Exception as exc:  # reported, never fatal (as in _process)
-                with self._cond:
-                    self._errors += 1
-                    self._last_error = f"{type(exc).__name__}: {exc}"
-                self.get_logger().error(
-                    f"detector failed on its delayed estimates: {type(exc).__name__}: {exc}",
-                    throttle_duration_sec=5.0,
-                )
+                self._report_error("detector failed on its delayed estimates", exc)
                 return
         self._publish_delayed(estimates)
+
+    def _report_error(self, what: str, exc: Exception, in_period: bool = False) -> None:
+        """Count a failure (in the diagnostics period's count too if ``in_period``) and
+        log it, at most every 5 s."""
+        with self._cond:
+            self._errors += 1
+            if in_period:
+                self._period.errors += 1
+            self._last_error = f"{type(exc).__name__}: {exc}"
+        self.get_logger().error(f"{what}: {type(exc).__name__}: {exc}", throttle_duration_sec=5.0)
 
     def _publish_estimate(self, estimate: Any, points: np.ndarray | None) -> None:
         frame_id = self._values["frame_id"]
