@@ -1,10 +1,11 @@
 """``clusterfilter demo``: simulate, detect over DDS in three processes, evaluate, plot.
 
 1. simulate a scenario into OUT/sequence (a challenge-format folder with ground truth);
-2. start the detector node, a recorder of ``/uav/pose`` and a replay of the folder as
-   three processes on loopback DDS with one random ROS domain for this run;
-3. evaluate the recorded poses against the ground truth, print the metrics, write
-   OUT/metrics.json and the trajectory plot OUT/trajectory.png.
+2. start the detector node, a recorder of ``/uav/pose``, one of ``/uav/pose_delayed``
+   (the ``report_lag`` output, ``--report-lag`` seconds late) and a replay of the folder
+   as processes on loopback DDS with one random ROS domain for this run;
+3. evaluate the recorded poses against the ground truth, print the metrics of both
+   outputs, write OUT/metrics.json and the trajectory plot OUT/trajectory.png.
 """
 
 from __future__ import annotations
@@ -37,6 +38,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--rate", type=float, default=1.0, help="replay speed, 1 = real time (default: 1)"
     )
     p.add_argument("--params-file", help="detector parameters (default: config/detector.yaml)")
+    p.add_argument(
+        "--report-lag",
+        type=float,
+        default=3.0,
+        help="also record /uav/pose_delayed with this report_lag (s); 0: not (default: 3)",
+    )
     p.set_defaults(func=run)
 
 
@@ -63,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.rate > 0:
         raise ClusterfilterError(f"--rate must be > 0 for the demo, got {args.rate}")
+    if not 0 <= args.report_lag <= 60:
+        raise ClusterfilterError(f"--report-lag must be within [0, 60], got {args.report_lag}")
     started = time.monotonic()
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="clusterfilter-demo-"))
     out.mkdir(parents=True, exist_ok=True)
@@ -90,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     env = processes.demo_environment()
     logs = out / "logs"
     estimates_csv = out / "estimates.csv"
+    late_csv = out / "estimates_late.csv"
     points_npy = out / "drone_points.npy"
     bag = out / "estimates_bag"
     if bag.exists():
@@ -109,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
             str(params_file),
             "-p",
             "target_offset=" + ",".join(repr(v) for v in offset),
+            "-p",
+            f"report_lag={args.report_lag!r}",
         ),
         env,
         logs,
@@ -132,15 +144,32 @@ def run(args: argparse.Namespace) -> int:
         logs,
     )
     children = [detector, recorder]
+    late_recorder = None
+    if args.report_lag > 0:
+        late_recorder = processes.start(
+            "late_recorder",
+            processes.cli_command(
+                "record",
+                str(late_csv),
+                "--topic",
+                "/uav/pose_delayed",
+                "--duration",  # a bound only: stopped after the replay (below)
+                f"{replay_timeout + 60.0:.0f}",
+            ),
+            env,
+            logs,
+        )
+        children.append(late_recorder)
     try:
-        # Replay only once the recorder hears the detector, so no pose is missed.
-        if not processes.wait_for_log(recorder, "record: matched", 60.0):
-            raise ClusterfilterError(
-                "the recorder never saw the detector's /uav/pose:\n"
-                + recorder.log_tail()
-                + "\n--- detector log ---\n"
-                + detector.log_tail()
-            )
+        # Replay only once the recorders hear the detector, so no pose is missed.
+        for rec in filter(None, (recorder, late_recorder)):
+            if not processes.wait_for_log(rec, "record: matched", 60.0):
+                raise ClusterfilterError(
+                    f"the {rec.name} never saw the detector:\n"
+                    + rec.log_tail()
+                    + "\n--- detector log ---\n"
+                    + detector.log_tail()
+                )
         replay = processes.start(
             "replay",
             processes.cli_command(
@@ -167,6 +196,15 @@ def run(args: argparse.Namespace) -> int:
         if code != 0 or not estimates_csv.is_file():
             raise ClusterfilterError(f"recorder exited with {code}:\n{recorder.log_tail()}")
         drain = time.monotonic() - replay_done
+        if late_recorder is not None:
+            # The detector estimates the last report_lag seconds of frames once its input
+            # has been quiet for report_lag (at least 1) s, checked every second.
+            time.sleep(max(args.report_lag, 1.0) + 2.5)
+            code = late_recorder.interrupt()
+            if code != 0 or not late_csv.is_file():
+                raise ClusterfilterError(
+                    f"late recorder exited with {code}:\n{late_recorder.log_tail()}"
+                )
         detector_code = detector.interrupt()
         if detector_code != 0:
             print(
@@ -182,6 +220,11 @@ def run(args: argparse.Namespace) -> int:
     gt = sequence.ground_truth
     result = evaluate(pred, gt, duration=span)
     metrics = result.as_dict()
+    late_metrics = None
+    if late_recorder is not None:
+        late_pred = read_positions_csv(late_csv)
+        late_metrics = evaluate(late_pred, gt, duration=span).as_dict()
+        late_metrics["poses"] = len(late_pred)
     metrics_path = out / "metrics.json"
     from clusterfilter_ros.io.atomic import atomic_write_text
 
@@ -195,6 +238,8 @@ def run(args: argparse.Namespace) -> int:
         "target_offset": offset,
         "detector_drain_seconds": round(drain, 3),
         "metrics": metrics,
+        "report_lag": args.report_lag,
+        "late_metrics": late_metrics,
     }
     atomic_write_text(metrics_path, json.dumps(summary, indent=2) + "\n")
     plot_path = plot_evaluation(
@@ -216,10 +261,18 @@ def run(args: argparse.Namespace) -> int:
         "false_alarm_seconds",
     ):
         print(f"  {key:>20}: {_fmt(metrics.get(key))}")
+    if late_metrics is not None:
+        print(
+            f"demo: {late_metrics['poses']} poses {args.report_lag:g} s late "
+            "(/uav/pose_delayed: every frame again, from the returns on both sides of it)"
+        )
+        for key in ("coverage", "detection_rate", "rmse"):
+            print(f"  {key:>20}: {_fmt(late_metrics.get(key))}")
     print("demo: outputs")
     for label, path in (
         ("simulated sequence", folder),
         ("estimates (CSV)", estimates_csv),
+        *([("late estimates (CSV)", late_csv)] if late_metrics is not None else []),
         ("estimates (ROS 2 bag)", bag),
         ("drone points", points_npy),
         ("metrics", metrics_path),

@@ -110,6 +110,10 @@ def test_short_demo_writes_outputs(tmp_path, ros_env):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     summary = json.loads((out / "metrics.json").read_text())
     assert summary["frames"] > 0 and "coverage" in summary["metrics"]
+    # The late output (report_lag 3 s) is recorded and evaluated too.
+    late = summary["late_metrics"]
+    assert summary["report_lag"] == 3.0 and "coverage" in late and late["poses"] >= 0
+    assert (out / "estimates_late.csv").read_text().startswith("timestamp,x,y,z")
     assert (out / "trajectory.png").stat().st_size > 10_000
     assert (out / "estimates.csv").read_text().startswith("timestamp,x,y,z")
     assert "trajectory plot" in proc.stdout
