@@ -1,4 +1,4 @@
-"""``clusterfilter demo``: simulate, detect over DDS in three processes, evaluate, plot.
+"""``clusterfilter demo``: simulate, detect over DDS in separate processes, evaluate, plot.
 
 1. simulate a scenario into OUT/sequence (a challenge-format folder with ground truth);
 2. start the detector node, a recorder of ``/uav/pose``, one of ``/uav/pose_delayed``
@@ -25,8 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "demo",
         help="simulate a scene, run node + replay + recorder over DDS, evaluate and plot",
         description="End-to-end demo: simulate a scenario, start the detector node, replay "
-        "the simulated lidars into it and record /uav/pose (three processes over loopback "
-        "DDS), then evaluate against ground truth and plot.",
+        "the simulated lidars into it and record /uav/pose and /uav/pose_delayed (separate "
+        "processes over loopback DDS), then evaluate against ground truth and plot.",
     )
     p.add_argument("--scenario", default="default", help="simulator scenario (default: default)")
     p.add_argument("--seed", type=int, default=0, help="simulator seed (default: 0)")
