@@ -19,18 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from clusterfilter_ros.core.evaluation import observable_mask
-from clusterfilter_ros.core.frame import TimedPositions
-from clusterfilter_ros.core.offline import detect_offline
-from clusterfilter_ros.core.streaming import run_streaming
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from detector_accuracy import (  # noqa: E402
     SIM_CACHE,
-    dedupe,
     drone_hit_stamps,
-    estimates_to_positions,
-    evaluate_on_sim,
     load_sim,
+    run_case,
     sim_params,
 )
 
@@ -60,25 +55,15 @@ def main(argv: list[str] | None = None) -> int:
     import matplotlib.pyplot as plt
 
     sim = load_sim(args.scenario, args.seed, args.cache, args.duration)
-    frames = sim.sequence.frames
     gt = sim.sequence.ground_truth
-    t0 = frames[0].stamp
-    # Offline underneath (wide, light), then the late output, then the live one on top.
-    runs = {
-        "offline": (detect_offline(frames, sim_params(sim)).estimates, "#b0b0b0", 4.0),
-        f"{args.lag:g} s late (/uav/pose_delayed)": (
-            estimates_to_positions(
-                run_streaming(frames, sim_params(sim, {"report_lag": args.lag}))
-            ),
-            "#1a9641",
-            2.0,
-        ),
-        "live (/uav/pose)": (
-            estimates_to_positions(run_streaming(frames, sim_params(sim))),
-            "#1f5fbf",
-            1.0,
-        ),
-    }
+    t0 = sim.sequence.frames[0].stamp
+    # Offline underneath (wide, light), then the late output, then the live one on top:
+    # (label, benchmark mode, colour, line width).
+    runs = [
+        ("offline", "offline", "#b0b0b0", 4.0),
+        (f"{args.lag:g} s late (/uav/pose_delayed)", "delayed", "#1a9641", 2.0),
+        ("live (/uav/pose)", "stream", "#1f5fbf", 1.0),
+    ]
     fig, (ax_range, ax_err) = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
     ax_range.plot(
         gt.stamps - t0, np.linalg.norm(gt.xyz, axis=1), color="#d7191c", lw=1.0, label="truth"
@@ -87,9 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     ax_err.fill_between(
         gt.stamps - t0, 0, 1, where=obs, color="#fde0dd", step="mid", label="drone observable"
     )
-    for name, (pred, colour, width) in runs.items():
-        pred = dedupe(TimedPositions(pred.stamps, pred.xyz))
-        res = evaluate_on_sim(sim, pred).as_dict()
+    for name, mode, colour, width in runs:
+        res, pred, _ = run_case(sim, mode, {}, report_lag=args.lag)
         label = f"{name}: {100 * res['observable_detection_rate']:.1f}% of the observable time" + (
             f", RMSE {res['rmse']:.2f} m" if res["rmse"] is not None else ""
         )
