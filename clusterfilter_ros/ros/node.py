@@ -411,11 +411,14 @@ class DetectorNode(Node):
 
     def _publish_delayed(self, estimates: list[Any]) -> None:
         """Publish ``report_lag`` estimates on ``/uav/pose_delayed``."""
+        published = 0
         for estimate in estimates:
             if np.all(np.isfinite(estimate.position)):
                 self._delayed_pub.publish(self._pose(estimate))
-                with self._cond:
-                    self._delayed_estimates += 1
+                published += 1
+        if published:
+            with self._cond:
+                self._delayed_estimates += published
 
     def _flush_delayed_if_idle(self) -> None:
         """The input stopped: estimate the frames still waiting for ``report_lag`` once
@@ -426,9 +429,7 @@ class DetectorNode(Node):
                 busy = self._busy or len(self._merger) > 0
             if busy or idle < max(float(self._detector.params.report_lag), 1.0):
                 return
-            if not self._detector.stats()["delayed_pending"]:
-                return
-            try:
+            try:  # nothing to do (and nothing returned) when no frame is waiting
                 estimates = self._detector.flush()
             except Exception as exc:  # reported, never fatal (as in _process)
                 self._report_error("detector failed on its delayed estimates", exc)
