@@ -592,26 +592,38 @@ class StreamingDetector:
 
     def _release_delayed(self, until: float) -> None:
         """Make the delayed estimates of the waiting frames stamped at or before ``until``
-        (and of the oldest ones beyond ``_MAX_LAGGED`` waiting frames)."""
-        lagged = self._lagged
+        (and of the oldest ones beyond ``_MAX_LAGGED`` waiting frames), from the current
+        track's samples on both sides of each (:func:`smoothed_position`), while the track
+        is confident and push() has returned an estimate since the frame's stamp: an
+        object confirmed only after its returns had stopped (so never reported by push)
+        is not reported late either."""
+        lagged, p = self._lagged, self.params
+        samples = None  # the track as arrays, built once for all frames released here
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
-            estimate = self._delayed_estimate(lagged.popleft())
+            stamp = lagged.popleft()
+            if not self._track or self._selected_conf < p.min_confidence:
+                continue
+            if self._last_live < stamp:
+                continue
+            if samples is None:
+                track = sorted(self._track, key=lambda s: s.t)
+                samples = (
+                    np.array([s.t for s in track]),
+                    np.array([s.position for s in track]),
+                    np.array([float(s.points.shape[0]) for s in track]),
+                )
+            estimate = self._delayed_estimate(stamp, *samples)
             if estimate is not None:
                 self.delayed_dropped += len(self._ready) == self._ready.maxlen
                 self._ready.append(estimate)
 
-    def _delayed_estimate(self, stamp: float) -> Estimate | None:
-        """The position at ``stamp`` from the current track's samples on both sides of it
-        (:func:`smoothed_position`), while the track is confident and push() has returned
-        an estimate since ``stamp``: an object confirmed only after its returns had
-        stopped (so never reported by push) is not reported late either."""
+    def _delayed_estimate(
+        self, stamp: float, ts: np.ndarray, ps: np.ndarray, ws: np.ndarray
+    ) -> Estimate | None:
+        """The delayed estimate at ``stamp`` from the track's samples (times ``ts``
+        ascending, positions ``ps``, point counts ``ws``), or None without support."""
         p = self.params
-        if not self._track or self._selected_conf < p.min_confidence or self._last_live < stamp:
-            return None
-        track = sorted(self._track, key=lambda s: s.t)
-        ts = np.array([s.t for s in track])
-        ws = np.array([float(s.points.shape[0]) for s in track])
-        position = smoothed_position(ts, np.array([s.position for s in track]), ws, stamp, p)
+        position = smoothed_position(ts, ps, ws, stamp, p)
         if position is None:
             return None
         n = int(ws[np.abs(ts - stamp) <= p.track_window].sum())
