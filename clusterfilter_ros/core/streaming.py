@@ -61,6 +61,10 @@ from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
 #: stream whose stamps stop advancing cannot grow the queue without bound).
 _MAX_LAGGED = 10000
 
+#: Earlier pieces of reported tracks kept for report_lag estimates (older ones are
+#: dropped first; they are also dropped once no waiting frame can need them).
+_MAX_ARCHIVED = 64
+
 #: Parameters whose change invalidates the accumulated state (voxel keys, filtering).
 _STRUCTURAL = {
     "static_voxel",
@@ -88,6 +92,49 @@ class _TrackSample:
     t: float
     position: np.ndarray  # (3,) float64 mean of the frame's drone points
     points: np.ndarray  # (n, 3) float32 the drone points themselves
+
+
+@dataclass(frozen=True)
+class _TrackPiece:
+    """A track's samples as arrays, times ascending (report_lag)."""
+
+    ts: np.ndarray  # (S,) float64
+    ps: np.ndarray  # (S, 3) float64 positions
+    ws: np.ndarray  # (S,) float64 point counts
+    confidence: float
+
+
+def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bool:
+    """Whether ``later`` (starting after ``earlier`` ends) continues the same object: at
+    most ``link_max_gap`` after it, and the two straight-line fits over ``track_window``
+    at their facing ends meet in the middle of the gap within ``track_gate`` (plus the
+    ``link_max_accel`` allowance for the gap)."""
+    p = params
+    gap = float(later.ts[0] - earlier.ts[-1])
+    if not 0.0 <= gap <= p.link_max_gap:
+        return False
+    middle = earlier.ts[-1] + 0.5 * gap
+    ends = []
+    for piece, near in (
+        (earlier, earlier.ts >= earlier.ts[-1] - p.track_window),
+        (later, later.ts <= later.ts[0] + p.track_window),
+    ):
+        ts, ps, ws = piece.ts[near], piece.ps[near], piece.ws[near]
+        slope, mean, tc = weighted_line(ts, ps, ws)
+        if ts[-1] - ts[0] < 2 * p.frame_period:
+            slope = np.zeros(3)
+        ends.append(mean + slope * (middle - tc))
+    reach = p.track_gate + 0.5 * p.link_max_accel * (0.5 * gap) ** 2
+    return float(np.linalg.norm(ends[0] - ends[1])) <= reach
+
+
+def _sample_arrays(samples: list[_TrackSample]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(times, positions, point counts) of samples sorted by time."""
+    return (
+        np.array([s.t for s in samples]),
+        np.array([s.position for s in samples]),
+        np.array([float(s.points.shape[0]) for s in samples]),
+    )
 
 
 @dataclass(frozen=True)
@@ -174,6 +221,9 @@ class StreamingDetector:
         self._foreground_points = 0
         self._jump_candidate: float | None = None
         self._last_live = -math.inf  # stamp of the newest estimate push() returned
+        # report_lag: earlier pieces of reported tracks, for the frames waiting for their
+        # delayed estimate that the current track no longer reaches (oldest first).
+        self._archive: deque[_TrackPiece] = deque(maxlen=_MAX_ARCHIVED)
         # (newest sample time, position there, velocity) of the last reported track.
         self._last_reported: tuple[float, np.ndarray, np.ndarray] | None = None
 
@@ -415,6 +465,7 @@ class StreamingDetector:
         if self.params.static_suppression and self._static.size:
             self._drop_static_from_history()
         old_track = list(self._track)
+        old_conf = self._selected_conf
         self._track.clear()
         self._selected_conf = 0.0
         self._clusters = choice.clusters
@@ -427,10 +478,38 @@ class StreamingDetector:
                 self._catch_up()
             else:
                 self._catch_up(after=choice.snapshot.now)
+        if self.params.report_lag > 0 and old_track and old_conf >= self.params.min_confidence:
+            self._archive_piece(old_track, old_conf)
         ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
+
+    def _archive_piece(self, old_track: list[_TrackSample], confidence: float) -> None:
+        """After a re-clustering replaced the reported track ``old_track``: keep its
+        samples older than the new track's first one for the frames still waiting for
+        their delayed estimate (report_lag), which the new track may no longer reach. A
+        track dropped while its returns were still fresh (at most ``max_extrapolation``
+        old) was rejected, not lost: it and the pieces before it are forgotten."""
+        p = self.params
+        current = bool(self._track) and self._selected_conf >= p.min_confidence
+        if not current and self._now - max(s.t for s in old_track) <= p.max_extrapolation:
+            self._archive.clear()
+            return
+        first = min((s.t for s in self._track), default=math.inf) if current else math.inf
+        kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
+        if kept:
+            self._archive.append(_TrackPiece(*_sample_arrays(kept), confidence))
+        self._prune_archive()
+
+    def _prune_archive(self) -> None:
+        """Forget the archived pieces no frame still waiting (stamped at most
+        ``report_lag`` before the newest) can take samples from."""
+        p = self.params
+        reach = max(p.track_window, p.link_max_gap) + max(p.max_gap, p.max_extrapolation)
+        horizon = self._now - p.report_lag - reach
+        while self._archive and self._archive[0].ts[-1] < horizon:
+            self._archive.popleft()
 
     def _expected_position(
         self, previous: tuple[np.ndarray, int] | None
@@ -592,44 +671,67 @@ class StreamingDetector:
 
     def _release_delayed(self, until: float) -> None:
         """Make the delayed estimates of the waiting frames stamped at or before ``until``
-        (and of the oldest ones beyond ``_MAX_LAGGED`` waiting frames), from the current
-        track's samples on both sides of each (:func:`smoothed_position`), while the track
-        is confident and push() has returned an estimate since the frame's stamp: an
-        object confirmed only after its returns had stopped (so never reported by push)
-        is not reported late either."""
-        lagged, p = self._lagged, self.params
-        samples = None  # the track as arrays, built once for all frames released here
+        (and of the oldest ones beyond ``_MAX_LAGGED`` waiting frames), from the samples
+        on both sides of each (:func:`smoothed_position`) of the reported track
+        (:meth:`_delayed_track`). Only where push() has returned an estimate since the
+        frame's stamp: an object confirmed only after its returns had stopped (so never
+        reported by push) is not reported late either."""
+        lagged = self._lagged
+        track: _TrackPiece | None | bool = False  # built once for all frames released here
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             stamp = lagged.popleft()
-            if not self._track or self._selected_conf < p.min_confidence:
-                continue
             if self._last_live < stamp:
                 continue
-            if samples is None:
-                track = sorted(self._track, key=lambda s: s.t)
-                samples = (
-                    np.array([s.t for s in track]),
-                    np.array([s.position for s in track]),
-                    np.array([float(s.points.shape[0]) for s in track]),
-                )
-            estimate = self._delayed_estimate(stamp, *samples)
+            if track is False:
+                track = self._delayed_track()
+            if track is None:
+                continue
+            estimate = self._delayed_estimate(stamp, track)
             if estimate is not None:
                 self.delayed_dropped += len(self._ready) == self._ready.maxlen
                 self._ready.append(estimate)
 
-    def _delayed_estimate(
-        self, stamp: float, ts: np.ndarray, ps: np.ndarray, ws: np.ndarray
-    ) -> Estimate | None:
-        """The delayed estimate at ``stamp`` from the track's samples (times ``ts``
-        ascending, positions ``ps``, point counts ``ws``), or None without support."""
+    def _delayed_track(self) -> _TrackPiece | None:
+        """The samples delayed estimates come from: the current track while it is
+        confident, else the newest archived piece (a reported track dropped once stale),
+        preceded by the archived pieces it continues (:func:`_continues`); None if there
+        is neither."""
         p = self.params
+        self._prune_archive()
+        pieces = list(self._archive)
+        if self._track and self._selected_conf >= p.min_confidence:
+            track = sorted(self._track, key=lambda s: s.t)
+            pieces.append(_TrackPiece(*_sample_arrays(track), self._selected_conf))
+        if not pieces:
+            return None
+        chain = pieces.pop()
+        for piece in reversed(pieces):
+            older = piece.ts < chain.ts[0]
+            if not older.any():
+                continue  # the newer track reaches back over the whole piece
+            piece = _TrackPiece(piece.ts[older], piece.ps[older], piece.ws[older], 0.0)
+            if not _continues(piece, chain, p):
+                break
+            chain = _TrackPiece(
+                np.concatenate([piece.ts, chain.ts]),
+                np.concatenate([piece.ps, chain.ps]),
+                np.concatenate([piece.ws, chain.ws]),
+                chain.confidence,
+            )
+        return chain
+
+    def _delayed_estimate(self, stamp: float, piece: _TrackPiece) -> Estimate | None:
+        """The delayed estimate at ``stamp`` from one track's samples, or None where they
+        do not support one."""
+        p = self.params
+        ts, ps, ws = piece.ts, piece.ps, piece.ws
         position = smoothed_position(ts, ps, ws, stamp, p)
         if position is None:
             return None
         n = int(ws[np.abs(ts - stamp) <= p.track_window].sum())
         if n < p.min_points:
             return None
-        return Estimate(stamp, reported_positions(position, p)[0], self._selected_conf, n)
+        return Estimate(stamp, reported_positions(position, p)[0], piece.confidence, n)
 
     def _estimate(self, stamp: float) -> Estimate | None:
         p = self.params

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from clusterfilter_ros.core import streaming
@@ -139,6 +141,130 @@ def test_delayed_estimates_nobody_takes_are_bounded(scene, monkeypatch):
     made = det.flush()
     assert len(made) == 7 and det.stats()["delayed_dropped"] > 0
     assert made[-1].stamp == frames[-1].stamp
+
+
+def _late_pieces_only(monkeypatch, cut: float) -> None:
+    """Make every re-clustering after ``cut`` + 1 s select a track that starts at
+    ``cut`` (as when the selected cluster is a later piece of the flight)."""
+    real = streaming._recluster_snapshot
+
+    def later_piece(snap):
+        choice = real(snap)
+        if choice.samples is None or snap.now < cut + 1.0:
+            return choice
+        kept = [s for s in choice.samples if s.t >= cut]
+        return dataclasses.replace(choice, samples=kept or None)
+
+    monkeypatch.setattr(streaming, "_recluster_snapshot", later_piece)
+
+
+def _delayed_run(frames, lag):
+    det = StreamingDetector(detector_params({"report_lag": lag}))
+    _, delayed, _ = _push_all(frames, det)
+    return det, delayed + det.flush()
+
+
+def test_frames_the_current_track_no_longer_reaches_come_from_the_earlier_piece(
+    scene, drone_path_fn, monkeypatch
+):
+    frames, _, _ = scene(duration=12.0, wall_points=200)
+    lag, cut = 5.0, 1006.0
+    _, reference = _delayed_run(frames, lag)
+    _late_pieces_only(monkeypatch, cut)
+    det, delayed = _delayed_run(frames, lag)
+    # From 1007 s on the track starts at 1006 s; the frames between the first report and
+    # 1006 s are estimated after that (5 s late), from the pieces of the track archived
+    # when the re-clusterings cut them off, which the track continues.
+    before_cut = [e.stamp for e in reference if e.stamp < cut - 0.5]
+    assert len(before_cut) >= 20
+    assert [e.stamp for e in delayed] == [e.stamp for e in reference]
+    stamps = np.array([e.stamp for e in delayed])
+    pos = np.array([e.position for e in delayed])
+    err = np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.3
+    # Only pieces some waiting frame may still need are kept.
+    assert 0 < len(det._archive) <= 12
+    p = det.params
+    span = p.report_lag + max(p.track_window, p.link_max_gap) + max(p.max_gap, p.max_extrapolation)
+    assert min(piece.ts[-1] for piece in det._archive) >= det._now - span
+
+
+def test_without_the_archive_those_frames_would_be_lost(scene, monkeypatch):
+    frames, _, _ = scene(duration=12.0, wall_points=200)
+    _late_pieces_only(monkeypatch, 1006.0)
+    monkeypatch.setattr(StreamingDetector, "_archive_piece", lambda self, *a: None)
+    _, delayed = _delayed_run(frames, 5.0)
+    # The frames released after 1007 s and before the track reaches them (5 s late).
+    assert delayed and not [e for e in delayed if 1002.5 <= e.stamp <= 1005.5]
+
+
+def _piece(ts, ps, conf=0.8):
+    return streaming._TrackPiece(ts, ps, np.full(ts.size, 3.0), conf)
+
+
+def test_a_piece_continues_the_same_object_not_another_one():
+    ts = np.arange(0.0, 2.0, 0.1)
+    drone = _piece(ts, _line(ts))
+    later = np.arange(2.6, 4.0, 0.1)
+    assert streaming._continues(drone, _piece(later, _line(later)), P)
+    # 10 m off, or beyond link_max_gap: another object.
+    assert not streaming._continues(drone, _piece(later, _line(later) + [0.0, 10.0, 0.0]), P)
+    far = np.arange(2.0 + P.link_max_gap + 0.2, 5.0, 0.1)
+    assert not streaming._continues(drone, _piece(far, _line(far)), P)
+
+
+def _detector_with(archive, track_t=None):
+    det = StreamingDetector(detector_params({"report_lag": 5.0}))
+    det._archive.extend(archive)
+    if track_t is not None:
+        for t, xyz in zip(track_t, _line(track_t), strict=True):
+            det._track.append(streaming._TrackSample(float(t), xyz, np.zeros((3, 3), np.float32)))
+        det._selected_conf = 0.9
+    return det
+
+
+def test_the_delayed_track_joins_the_pieces_it_continues_and_not_another_object():
+    bird_t, drone_t, track_t = np.arange(0, 1, 0.1), np.arange(1.2, 3, 0.1), np.arange(3.3, 5, 0.1)
+    bird = _piece(bird_t, _line(bird_t) + [30.0, 0.0, 0.0], conf=0.6)
+    det = _detector_with([bird, _piece(drone_t, _line(drone_t), conf=0.7)], track_t)
+    chain = det._delayed_track()
+    np.testing.assert_array_equal(chain.ts, np.concatenate([drone_t, track_t]))
+    assert chain.confidence == 0.9
+    assert det._delayed_estimate(2.0, chain).confidence == 0.9
+    # The bird's time gets nothing: the drone's pieces do not reach it.
+    assert det._delayed_estimate(0.5, chain) is None
+    # Without a current track: the newest archived piece (a track dropped once stale).
+    det = _detector_with([bird, _piece(drone_t, _line(drone_t), conf=0.7)])
+    np.testing.assert_array_equal(det._delayed_track().ts, drone_t)
+    assert _detector_with([])._delayed_track() is None
+
+
+def _old_track(ts, offset=0.0):
+    return [
+        streaming._TrackSample(float(t), xyz + offset, np.zeros((2, 3), np.float32))
+        for t, xyz in zip(ts, _line(ts), strict=True)
+    ]
+
+
+def test_a_track_dropped_while_fresh_is_forgotten_and_one_dropped_stale_is_kept():
+    det = _detector_with([_piece(np.arange(0, 1, 0.1), _line(np.arange(0, 1, 0.1)))])
+    det._now = 3.2
+    # Dropped 0.3 s after its newest return: rejected by the re-clustering.
+    det._archive_piece(_old_track(np.arange(1.0, 2.9, 0.1)), 0.8)
+    assert len(det._archive) == 0
+    # Dropped 2 s after its newest return: lost, its samples stay for the waiting frames.
+    det._now = 4.9
+    det._archive_piece(_old_track(np.arange(1.0, 2.9, 0.1)), 0.8)
+    assert len(det._archive) == 1 and det._archive[0].ts.size == 19
+    # Replaced by a track starting at 2.0 s: only its samples before that are kept.
+    det = _detector_with([], np.arange(2.0, 3.0, 0.1))
+    det._now = 3.0
+    det._archive_piece(_old_track(np.arange(0.0, 2.95, 0.1)), 0.8)
+    assert len(det._archive) == 1 and det._archive[0].ts[-1] < 2.0 - 1e-9
+    # Pieces no waiting frame can need any more are dropped.
+    det._now = 30.0
+    det._archive_piece(_old_track(np.arange(0.0, 2.95, 0.1)), 0.8)
+    assert len(det._archive) == 0
 
 
 # --------------------------------------------------------------- smoothed_position
