@@ -17,12 +17,15 @@ def plot_evaluation(
     drone_points: np.ndarray | None = None,
     title: str = "",
     max_gap: float = 0.3,
+    late: TimedPositions | None = None,
+    late_label: str = "delayed estimate",
 ) -> Path:
     """Top view (x-y), side view (x-z) and 3D error over time; written to ``out_png``.
 
     ``drone_points``: optional (M, 3) or (M, 4) ``[t,] x, y, z`` points the detector
     attributed to the drone (drawn green, as in the paper's figure 4). Ground truth is
-    red, estimates blue. Returns the written path.
+    red, estimates blue; ``late``: optional second estimates (such as the ``report_lag``
+    output), drawn orange as ``late_label``. Returns the written path.
     """
     import matplotlib
 
@@ -50,6 +53,8 @@ def plot_evaluation(
             ax.scatter(pts[:, a], pts[:, b], s=2, c="tab:green", alpha=0.4, label="drone points")
         if gt is not None and len(gt):
             ax.plot(gt.xyz[:, a], gt.xyz[:, b], "-", c="tab:red", lw=1.5, label="ground truth")
+        if late is not None and len(late):
+            ax.plot(late.xyz[:, a], late.xyz[:, b], ".", c="tab:orange", ms=5, label=late_label)
         if len(pred):
             ax.plot(pred.xyz[:, a], pred.xyz[:, b], ".", c="tab:blue", ms=3, label="estimate")
         ax.set_xlabel(labels[0])
@@ -62,6 +67,13 @@ def plot_evaluation(
     t0 = None
     if gt is not None and len(gt):
         t0 = gt.stamps[0]
+        if late is not None and len(late):
+            late_err = np.linalg.norm(
+                interpolate_predictions(late, gt.stamps, max_gap) - gt.xyz, axis=1
+            )
+            ax_err.plot(
+                gt.stamps - t0, late_err, ".", c="tab:orange", ms=5, label=f"{late_label} error"
+            )
         matched = interpolate_predictions(pred, gt.stamps, max_gap)
         err = np.linalg.norm(matched - gt.xyz, axis=1)
         ax_err.plot(gt.stamps - t0, err, ".", c="tab:blue", ms=3, label="3D error")

@@ -221,6 +221,7 @@ def run(args: argparse.Namespace) -> int:
     result = evaluate(pred, gt, duration=span)
     metrics = result.as_dict()
     late_metrics = None
+    late_pred = None
     if late_recorder is not None:
         late_pred = read_positions_csv(late_csv)
         late_metrics = evaluate(late_pred, gt, duration=span).as_dict()
@@ -248,6 +249,8 @@ def run(args: argparse.Namespace) -> int:
         out / "trajectory.png",
         drone_points=drone_points,
         title=f"clusterfilter demo: scenario {args.scenario}, seed {args.seed}",
+        late=late_pred,
+        late_label=f"{args.report_lag:g} s late",
     )
     print(f"demo: {len(pred)} poses recorded from {n_frames} frames")
     for key in (
