@@ -34,6 +34,7 @@ extrapolated (fixed-lag smoothing; see :func:`smoothed_position`).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -102,6 +103,9 @@ class _TrackPiece:
     ps: np.ndarray  # (S, 3) float64 positions
     ws: np.ndarray  # (S,) float64 point counts
     confidence: float
+    # Newest stamp at which push() reported a position on this track (inf: the current
+    # track, which the detector-wide _last_live rule covers).
+    reported_until: float = math.inf
 
 
 def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bool:
@@ -224,6 +228,9 @@ class StreamingDetector:
         # report_lag: earlier pieces of reported tracks, for the frames waiting for their
         # delayed estimate that the current track no longer reaches (oldest first).
         self._archive: deque[_TrackPiece] = deque(maxlen=_MAX_ARCHIVED)
+        # report_lag: (stamp, position) of push()'s recent estimates, to tell which kept
+        # piece the live output reported.
+        self._live_reports: deque[tuple[float, np.ndarray]] = deque(maxlen=_MAX_LAGGED)
         # (newest sample time, position there, velocity) of the last reported track.
         self._last_reported: tuple[float, np.ndarray, np.ndarray] | None = None
 
@@ -310,6 +317,8 @@ class StreamingDetector:
         lag = self.params.report_lag
         if lag > 0:
             self._lagged.append(stamp)
+            if estimate is not None:
+                self._live_reports.append((stamp, estimate.position))
         self._release_delayed(self._now - lag)
         self._last_push_ms = (time.perf_counter() - start) * 1e3
         return estimate
@@ -499,8 +508,26 @@ class StreamingDetector:
         first = min((s.t for s in self._track), default=math.inf) if current else math.inf
         kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
         if kept:
-            self._archive.append(_TrackPiece(*_sample_arrays(kept), confidence))
+            piece = _TrackPiece(*_sample_arrays(kept), confidence)
+            until = self._reported_until(piece)
+            self._archive.append(dataclasses.replace(piece, reported_until=until))
         self._prune_archive()
+
+    def _reported_until(self, piece: _TrackPiece) -> float:
+        """The newest stamp at which push() reported a position within ``track_gate`` of
+        the piece's own (:func:`smoothed_position`) there, or -inf."""
+        p = self.params
+        for stamp, position in reversed(self._live_reports):
+            if stamp > piece.ts[-1] + p.max_extrapolation:
+                continue
+            if stamp < piece.ts[0] - p.max_extrapolation:
+                break
+            own = smoothed_position(piece.ts, piece.ps, piece.ws, stamp, p)
+            if own is None:
+                continue
+            if float(np.linalg.norm(reported_positions(own, p)[0] - position)) <= p.track_gate:
+                return stamp
+        return -math.inf
 
     def _prune_archive(self) -> None:
         """Forget the archived pieces no frame still waiting (stamped at most
@@ -510,6 +537,9 @@ class StreamingDetector:
         horizon = self._now - p.report_lag - reach
         while self._archive and self._archive[0].ts[-1] < horizon:
             self._archive.popleft()
+        # A kept piece spans at most local_history.
+        while self._live_reports and self._live_reports[0][0] < horizon - p.local_history:
+            self._live_reports.popleft()
 
     def _expected_position(
         self, previous: tuple[np.ndarray, int] | None
@@ -672,53 +702,62 @@ class StreamingDetector:
     def _release_delayed(self, until: float) -> None:
         """Make the delayed estimates of the waiting frames stamped at or before ``until``
         (and of the oldest ones beyond ``_MAX_LAGGED`` waiting frames), from the samples
-        on both sides of each (:func:`smoothed_position`) of the reported track
-        (:meth:`_delayed_track`). Only where push() has returned an estimate since the
-        frame's stamp: an object confirmed only after its returns had stopped (so never
-        reported by push) is not reported late either."""
+        on both sides of each (:func:`smoothed_position`) of the reported tracks
+        (:meth:`_delayed_tracks`): the first that supports one. Only where push() has
+        returned an estimate since the frame's stamp: an object confirmed only after its
+        returns had stopped (so never reported by push) is not reported late either."""
         lagged = self._lagged
-        track: _TrackPiece | None | bool = False  # built once for all frames released here
+        tracks: list[_TrackPiece] | None = None  # built once for all frames released here
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             stamp = lagged.popleft()
             if self._last_live < stamp:
                 continue
-            if track is False:
-                track = self._delayed_track()
-            if track is None:
-                continue
-            estimate = self._delayed_estimate(stamp, track)
-            if estimate is not None:
-                self.delayed_dropped += len(self._ready) == self._ready.maxlen
-                self._ready.append(estimate)
+            if tracks is None:
+                tracks = self._delayed_tracks()
+            for track in tracks:
+                if stamp > track.reported_until:
+                    continue
+                estimate = self._delayed_estimate(stamp, track)
+                if estimate is not None:
+                    self.delayed_dropped += len(self._ready) == self._ready.maxlen
+                    self._ready.append(estimate)
+                    break
 
-    def _delayed_track(self) -> _TrackPiece | None:
-        """The samples delayed estimates come from: the current track while it is
-        confident, else the newest archived piece (a reported track dropped once stale),
-        preceded by the archived pieces it continues (:func:`_continues`); None if there
-        is neither."""
+    def _delayed_tracks(self) -> list[_TrackPiece]:
+        """The tracks delayed estimates come from, in order of preference: the current
+        track while it is confident, then the kept pieces newest first (a track cut off
+        by a later re-clustering, or dropped once stale); each preceded by the older
+        pieces it continues (:func:`_continues`). A kept piece serves only frames up to
+        the newest stamp at which the live output reported a position on it."""
         p = self.params
         self._prune_archive()
         pieces = list(self._archive)
         if self._track and self._selected_conf >= p.min_confidence:
             track = sorted(self._track, key=lambda s: s.t)
             pieces.append(_TrackPiece(*_sample_arrays(track), self._selected_conf))
-        if not pieces:
-            return None
-        chain = pieces.pop()
-        for piece in reversed(pieces):
-            older = piece.ts < chain.ts[0]
-            if not older.any():
-                continue  # the newer track reaches back over the whole piece
-            piece = _TrackPiece(piece.ts[older], piece.ps[older], piece.ws[older], 0.0)
-            if not _continues(piece, chain, p):
-                break
-            chain = _TrackPiece(
-                np.concatenate([piece.ts, chain.ts]),
-                np.concatenate([piece.ps, chain.ps]),
-                np.concatenate([piece.ws, chain.ws]),
-                chain.confidence,
-            )
-        return chain
+        chains: list[_TrackPiece] = []
+        while pieces:
+            chain = pieces.pop()
+            while pieces:
+                older = pieces[-1].ts < chain.ts[0]
+                if not older.any():
+                    pieces.pop()  # the newer track reaches back over the whole piece
+                    continue
+                piece = pieces[-1]
+                if not _continues(
+                    _TrackPiece(piece.ts[older], piece.ps[older], piece.ws[older], 0.0), chain, p
+                ):
+                    break
+                pieces.pop()
+                chain = _TrackPiece(
+                    np.concatenate([piece.ts[older], chain.ts]),
+                    np.concatenate([piece.ps[older], chain.ps]),
+                    np.concatenate([piece.ws[older], chain.ws]),
+                    chain.confidence,
+                    max(chain.reported_until, piece.reported_until),
+                )
+            chains.append(chain)
+        return chains
 
     def _delayed_estimate(self, stamp: float, piece: _TrackPiece) -> Estimate | None:
         """The delayed estimate at ``stamp`` from one track's samples, or None where they

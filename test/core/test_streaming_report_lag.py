@@ -223,20 +223,70 @@ def _detector_with(archive, track_t=None):
     return det
 
 
-def test_the_delayed_track_joins_the_pieces_it_continues_and_not_another_object():
+def _release_all(det, stamps):
+    det._last_live = max(stamps)
+    det._lagged.extend(stamps)
+    det._release_delayed(np.inf)
+    return {round(e.stamp, 3): e.confidence for e in det.delayed()}
+
+
+def test_delayed_tracks_join_the_pieces_they_continue_and_not_another_object():
     bird_t, drone_t, track_t = np.arange(0, 1, 0.1), np.arange(1.2, 3, 0.1), np.arange(3.3, 5, 0.1)
-    bird = _piece(bird_t, _line(bird_t) + [30.0, 0.0, 0.0], conf=0.6)
-    det = _detector_with([bird, _piece(drone_t, _line(drone_t), conf=0.7)], track_t)
-    chain = det._delayed_track()
-    np.testing.assert_array_equal(chain.ts, np.concatenate([drone_t, track_t]))
-    assert chain.confidence == 0.9
-    assert det._delayed_estimate(2.0, chain).confidence == 0.9
-    # The bird's time gets nothing: the drone's pieces do not reach it.
-    assert det._delayed_estimate(0.5, chain) is None
-    # Without a current track: the newest archived piece (a track dropped once stale).
-    det = _detector_with([bird, _piece(drone_t, _line(drone_t), conf=0.7)])
-    np.testing.assert_array_equal(det._delayed_track().ts, drone_t)
-    assert _detector_with([])._delayed_track() is None
+    drone = _piece(drone_t, _line(drone_t), conf=0.7)
+    bird = dataclasses.replace(
+        _piece(bird_t, _line(bird_t) + [30.0, 0.0, 0.0], conf=0.6), reported_until=-np.inf
+    )
+    det = _detector_with([bird, drone], track_t)
+    chains = det._delayed_tracks()
+    assert len(chains) == 2
+    np.testing.assert_array_equal(chains[0].ts, np.concatenate([drone_t, track_t]))
+    assert chains[0].confidence == 0.9 and chains[0].reported_until == np.inf
+    np.testing.assert_array_equal(chains[1].ts, bird_t)
+    # The bird's piece was never reported live: its frames get nothing.
+    assert _release_all(det, [0.5, 2.0, 4.0]) == {2.0: 0.9, 4.0: 0.9}
+    # Reported live up to 0.9 s: frames up to then take it (the track does not reach them).
+    det = _detector_with([dataclasses.replace(bird, reported_until=0.9), drone], track_t)
+    assert _release_all(det, [0.5, 2.0, 4.0]) == {0.5: 0.6, 2.0: 0.9, 4.0: 0.9}
+    # Without a current track: the kept pieces (a track dropped once stale).
+    det = _detector_with([bird, drone])
+    assert _release_all(det, [0.5, 2.0, 4.0]) == {2.0: 0.7}
+    assert _detector_with([])._delayed_tracks() == []
+
+
+def test_a_kept_piece_is_reported_until_the_newest_live_estimate_on_it():
+    det = _detector_with([])
+    ts = np.arange(0.0, 2.0, 0.1)
+    piece = _piece(ts, _line(ts))
+    assert det._reported_until(piece) == -np.inf
+    det._live_reports.extend([(0.5, _line(np.array([0.5]))[0]), (1.0, _line(np.array([1.0]))[0])])
+    det._live_reports.append((1.5, _line(np.array([1.5]))[0] + [5.0, 0.0, 0.0]))  # elsewhere
+    det._live_reports.append((9.0, _line(np.array([9.0]))[0]))  # beyond the piece
+    assert det._reported_until(piece) == 1.0
+
+
+def test_frames_before_a_long_silence_keep_their_track_after_a_new_one_is_selected(
+    scene, drone_path_fn, monkeypatch
+):
+    # No drone return from 1006 to 1008.5 s, longer than link_max_gap: the track selected
+    # after the silence does not continue the one before. 8 s late, the frames before the
+    # silence are released once the new track is selected; the earlier track's kept piece
+    # serves them, as the live output reported positions on it.
+    frames, _, _ = scene(duration=16.0, wall_points=200)
+    frames = [
+        Frame(f.stamp, f.sensor, f.xyz[:-3]) if 1006.0 < f.stamp < 1008.5 else f for f in frames
+    ]
+    _, delayed = _delayed_run(frames, 8.0)
+    before = [e for e in delayed if 1005.0 <= e.stamp <= 1006.0]
+    assert len(before) >= 18
+    err = np.linalg.norm(
+        np.array([e.position for e in before])
+        - drone_path_fn(np.array([e.stamp for e in before]) - 1000.0),
+        axis=1,
+    )
+    assert err.max() < 0.5
+    monkeypatch.setattr(StreamingDetector, "_reported_until", lambda self, piece: -np.inf)
+    _, without = _delayed_run(frames, 8.0)
+    assert len([e for e in without if 1005.0 <= e.stamp <= 1006.0]) < len(before) // 2
 
 
 def _old_track(ts, offset=0.0):
