@@ -488,21 +488,23 @@ class StreamingDetector:
             else:
                 self._catch_up(after=choice.snapshot.now)
         if self.params.report_lag > 0 and old_track and old_conf >= self.params.min_confidence:
-            self._archive_piece(old_track, old_conf)
+            self._archive_piece(old_track, old_conf, choice.snapshot.now)
         ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
 
-    def _archive_piece(self, old_track: list[_TrackSample], confidence: float) -> None:
-        """After a re-clustering replaced the reported track ``old_track``: keep its
-        samples older than the new track's first one for the frames still waiting for
-        their delayed estimate (report_lag), which the new track may no longer reach. A
-        track dropped while its returns were still fresh (at most ``max_extrapolation``
-        old) was rejected, not lost: it and the pieces before it are forgotten."""
+    def _archive_piece(self, old_track: list[_TrackSample], confidence: float, now: float) -> None:
+        """After the re-clustering of stream time ``now`` replaced the reported track
+        ``old_track``: keep its samples older than the new track's first one for the frames
+        still waiting for their delayed estimate (report_lag), which the new track may no
+        longer reach. A track dropped (no confident track after it) is kept only if it was
+        lost: its newest return more than ``reacquire_window`` old, so that nothing was
+        left to re-acquire. One dropped sooner was rejected by the re-clustering: it is
+        forgotten, and the pieces kept before it with it."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
-        if not current and self._now - max(s.t for s in old_track) <= p.max_extrapolation:
+        if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
             self._archive.clear()
             return
         first = min((s.t for s in self._track), default=math.inf) if current else math.inf

@@ -296,24 +296,44 @@ def _old_track(ts, offset=0.0):
     ]
 
 
-def test_a_track_dropped_while_fresh_is_forgotten_and_one_dropped_stale_is_kept():
+def test_a_drone_that_went_silent_is_reported_late_up_to_its_last_returns(scene, monkeypatch):
+    # The drone's returns stop at 6 s. Its cluster stays selected while its returns are
+    # in the 10 s local history; once they leave it (14 s) the track is dropped, before
+    # the frames of its last seconds are 12 s old: they take the lost track's kept
+    # samples (without them, nothing after 3 s would be reported late).
+    frames, _, _ = scene(duration=20.0, wall_points=200, drone_points=3)
+    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1006.0 else f for f in frames]
+    det, delayed = _delayed_run(frames, 12.0)
+    last_live = det._last_live
+    assert 1006.0 <= last_live <= 1006.6
+    assert max(e.stamp for e in delayed) >= last_live - 0.15
+    monkeypatch.setattr(StreamingDetector, "_archive_piece", lambda self, *a: None)
+    _, without = _delayed_run(frames, 12.0)
+    assert not [e for e in without if e.stamp >= 1003.0]
+
+
+def test_a_rejected_track_is_forgotten_and_a_lost_one_is_kept():
     det = _detector_with([_piece(np.arange(0, 1, 0.1), _line(np.arange(0, 1, 0.1)))])
-    det._now = 3.2
-    # Dropped 0.3 s after its newest return: rejected by the re-clustering.
-    det._archive_piece(_old_track(np.arange(1.0, 2.9, 0.1)), 0.8)
+    window = det.params.reacquire_window  # 3 s
+    old = _old_track(np.arange(1.0, 2.9, 0.1))  # newest return at 2.8 s
+    # Dropped 1.5 s after its newest return, while it could still have been re-acquired:
+    # rejected by the re-clustering; it and the pieces before it are forgotten.
+    det._now = 2.8 + 1.5
+    det._archive_piece(old, 0.8, det._now)
     assert len(det._archive) == 0
-    # Dropped 2 s after its newest return: lost, its samples stay for the waiting frames.
-    det._now = 4.9
-    det._archive_piece(_old_track(np.arange(1.0, 2.9, 0.1)), 0.8)
+    # Dropped once nothing was left to re-acquire: lost, its samples stay for the
+    # frames still waiting.
+    det._now = 2.8 + window + 0.2
+    det._archive_piece(old, 0.8, det._now)
     assert len(det._archive) == 1 and det._archive[0].ts.size == 19
     # Replaced by a track starting at 2.0 s: only its samples before that are kept.
     det = _detector_with([], np.arange(2.0, 3.0, 0.1))
     det._now = 3.0
-    det._archive_piece(_old_track(np.arange(0.0, 2.95, 0.1)), 0.8)
+    det._archive_piece(_old_track(np.arange(0.0, 2.95, 0.1)), 0.8, det._now)
     assert len(det._archive) == 1 and det._archive[0].ts[-1] < 2.0 - 1e-9
     # Pieces no waiting frame can need any more are dropped.
     det._now = 30.0
-    det._archive_piece(_old_track(np.arange(0.0, 2.95, 0.1)), 0.8)
+    det._archive_piece(_old_track(np.arange(0.0, 2.95, 0.1)), 0.8, det._now)
     assert len(det._archive) == 0
 
 
