@@ -35,6 +35,7 @@ def plot_evaluation(
     from clusterfilter_ros.core.evaluation import interpolate_predictions
     from clusterfilter_ros.io.atomic import atomic_output_path
 
+    live = "live " if late is not None else ""  # names the estimates apart from ``late``
     fig = plt.figure(figsize=(13, 4.6))
     ax_top = fig.add_subplot(1, 3, 1)
     ax_side = fig.add_subplot(1, 3, 2)
@@ -56,7 +57,9 @@ def plot_evaluation(
         if late is not None and len(late):
             ax.plot(late.xyz[:, a], late.xyz[:, b], ".", c="tab:orange", ms=5, label=late_label)
         if len(pred):
-            ax.plot(pred.xyz[:, a], pred.xyz[:, b], ".", c="tab:blue", ms=3, label="estimate")
+            ax.plot(
+                pred.xyz[:, a], pred.xyz[:, b], ".", c="tab:blue", ms=3, label=f"{live}estimate"
+            )
         ax.set_xlabel(labels[0])
         ax.set_ylabel(labels[1])
         ax.set_aspect("equal", adjustable="datalim")
@@ -76,7 +79,7 @@ def plot_evaluation(
             )
         matched = interpolate_predictions(pred, gt.stamps, max_gap)
         err = np.linalg.norm(matched - gt.xyz, axis=1)
-        ax_err.plot(gt.stamps - t0, err, ".", c="tab:blue", ms=3, label="3D error")
+        ax_err.plot(gt.stamps - t0, err, ".", c="tab:blue", ms=3, label=f"{live}3D error")
         missing = ~np.isfinite(err)
         if missing.any():
             ax_err.plot(
@@ -85,7 +88,7 @@ def plot_evaluation(
                 "|",
                 c="tab:red",
                 ms=8,
-                label="no estimate",
+                label=f"no {live}estimate",
             )
         ax_err.set_ylabel("3D error (m)")
         ax_err.legend(loc="best", fontsize=8)
