@@ -29,7 +29,11 @@ With ``report_lag`` > 0 each frame is estimated a second time once the stream ha
 is then, whose samples reach back to the start of its cluster in the local history and
 forward past the frame, so a drone is reported from its first returns rather than from
 the re-clustering that confirmed it, and gaps between returns are interpolated, not
-extrapolated (fixed-lag smoothing; see :func:`smoothed_position`).
+extrapolated (fixed-lag smoothing; see :func:`smoothed_position`). Where a later
+re-clustering selected a track that no longer reaches a waiting frame (a later piece of
+the flight) or the reported track was lost, the samples it had are kept for those frames:
+joined to the track that continues them, or else used for the frames up to the newest
+one at which the live output reported a position on them.
 """
 
 from __future__ import annotations
@@ -728,7 +732,7 @@ class StreamingDetector:
     def _delayed_tracks(self) -> list[_TrackPiece]:
         """The tracks delayed estimates come from, in order of preference: the current
         track while it is confident, then the kept pieces newest first (a track cut off
-        by a later re-clustering, or dropped once stale); each preceded by the older
+        by a later re-clustering, or lost); each preceded by the older
         pieces it continues (:func:`_continues`). A kept piece serves only frames up to
         the newest stamp at which the live output reported a position on it."""
         p = self.params
