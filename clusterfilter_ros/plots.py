@@ -70,15 +70,16 @@ def plot_evaluation(
     t0 = None
     if gt is not None and len(gt):
         t0 = gt.stamps[0]
+
+        def errors(series: TimedPositions) -> np.ndarray:
+            matched = interpolate_predictions(series, gt.stamps, max_gap)
+            return np.linalg.norm(matched - gt.xyz, axis=1)
+
         if late is not None and len(late):
-            late_err = np.linalg.norm(
-                interpolate_predictions(late, gt.stamps, max_gap) - gt.xyz, axis=1
-            )
             ax_err.plot(
-                gt.stamps - t0, late_err, ".", c="tab:orange", ms=5, label=f"{late_label} error"
+                gt.stamps - t0, errors(late), ".", c="tab:orange", ms=5, label=f"{late_label} error"
             )
-        matched = interpolate_predictions(pred, gt.stamps, max_gap)
-        err = np.linalg.norm(matched - gt.xyz, axis=1)
+        err = errors(pred)
         ax_err.plot(gt.stamps - t0, err, ".", c="tab:blue", ms=3, label=f"{live}3D error")
         missing = ~np.isfinite(err)
         if missing.any():

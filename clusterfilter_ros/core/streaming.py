@@ -112,6 +112,18 @@ class _TrackPiece:
     reported_until: float = math.inf
 
 
+def _track_line(
+    ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, params: ParamSet
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`weighted_line` through track samples, with no velocity from samples
+    spanning less than two frame periods: (velocity, weighted mean position, weighted
+    mean time)."""
+    slope, mean, tc = weighted_line(ts, ps, ws)
+    if ts[-1] - ts[0] < 2 * params.frame_period:
+        slope = np.zeros(3)
+    return slope, mean, tc
+
+
 def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bool:
     """Whether ``later`` (starting after ``earlier`` ends) continues the same object: at
     most ``link_max_gap`` after it, and the two straight-line fits over ``track_window``
@@ -127,10 +139,7 @@ def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bo
         (earlier, earlier.ts >= earlier.ts[-1] - p.track_window),
         (later, later.ts <= later.ts[0] + p.track_window),
     ):
-        ts, ps, ws = piece.ts[near], piece.ps[near], piece.ws[near]
-        slope, mean, tc = weighted_line(ts, ps, ws)
-        if ts[-1] - ts[0] < 2 * p.frame_period:
-            slope = np.zeros(3)
+        slope, mean, tc = _track_line(piece.ts[near], piece.ps[near], piece.ws[near], p)
         ends.append(mean + slope * (middle - tc))
     reach = p.track_gate + 0.5 * p.link_max_accel * (0.5 * gap) ** 2
     return float(np.linalg.norm(ends[0] - ends[1])) <= reach
@@ -662,9 +671,7 @@ class StreamingDetector:
         ps = np.array([s.position for s in samples])
         ws = np.array([float(s.points.shape[0]) for s in samples])
         n = int(ws.sum())
-        slope, mean, tc = weighted_line(ts, ps, ws)
-        if ts[-1] - ts[0] < 2 * p.frame_period:
-            slope = np.zeros(3)  # too short a span for a velocity
+        slope, mean, tc = _track_line(ts, ps, ws, p)
         age = stamp - last
         moving = float(np.linalg.norm(slope)) >= p.min_speed
         if moving and ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= p.max_extrapolation:
@@ -750,15 +757,14 @@ class StreamingDetector:
                     pieces.pop()  # the newer track reaches back over the whole piece
                     continue
                 piece = pieces[-1]
-                if not _continues(
-                    _TrackPiece(piece.ts[older], piece.ps[older], piece.ws[older], 0.0), chain, p
-                ):
+                head = _TrackPiece(piece.ts[older], piece.ps[older], piece.ws[older], 0.0)
+                if not _continues(head, chain, p):
                     break
                 pieces.pop()
                 chain = _TrackPiece(
-                    np.concatenate([piece.ts[older], chain.ts]),
-                    np.concatenate([piece.ps[older], chain.ps]),
-                    np.concatenate([piece.ws[older], chain.ws]),
+                    np.concatenate([head.ts, chain.ts]),
+                    np.concatenate([head.ps, chain.ps]),
+                    np.concatenate([head.ws, chain.ws]),
                     chain.confidence,
                     max(chain.reported_until, piece.reported_until),
                 )
@@ -990,9 +996,7 @@ def smoothed_position(
         if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
             x = stamp - tc
             return coef[0] + coef[1] * x + coef[2] * x * x
-    slope, mean, tc = weighted_line(tt, pp, ww)
-    if tt[-1] - tt[0] < 2 * p.frame_period:
-        slope = np.zeros(3)
+    slope, mean, tc = _track_line(tt, pp, ww, p)
     return mean + slope * (stamp - tc)
 
 
