@@ -947,6 +947,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         minimum=0.0,
         maximum=60.0,
     ),
+    ParamSpec(
+        "reacquire_join",
+        "bool",
+        True,
+        "Streaming: when the cluster near where a reported track would be now fails "
+        "keep_confidence on its own (a few returns after a gap), score it joined with the "
+        "cluster holding the track's newest returns, and continue the track with the "
+        "joined cluster if that passes keep_confidence (within reacquire_window of the "
+        "track's newest return); false = the fragment must be confirmed as a new track.",
+    ),
     # --- streaming accumulator ---
     ParamSpec(
         "global_window",

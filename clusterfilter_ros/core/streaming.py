@@ -169,6 +169,8 @@ class _HistorySnapshot:
     t: np.ndarray | None  # (N,) float64
     static_keys: np.ndarray | None  # (N,) int64 static_voxel keys of the points
     expected: tuple[np.ndarray, float] | None  # (position, gate) of the reported track
+    # (time, position) of the reported track's newest sample, with ``expected``
+    newest: tuple[float, np.ndarray] | None
     params: ParamSet
 
 
@@ -442,6 +444,7 @@ class StreamingDetector:
             previous = self._fit(self._now)
             self._last_reported = self._track_state()
         xyz = t = static_keys = None
+        expected = self._expected_position(previous)
         warming_up = self._now - self._origin < p.warmup
         if self._chunks and self._chunk_points and not warming_up:
             xyz = np.concatenate([c.xyz for c in self._chunks])
@@ -456,7 +459,10 @@ class StreamingDetector:
             xyz=xyz,
             t=t,
             static_keys=static_keys,
-            expected=self._expected_position(previous),
+            expected=expected,
+            newest=None
+            if expected is None or self._last_reported is None
+            else (self._last_reported[0], self._last_reported[1]),
             params=p,
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
@@ -849,6 +855,14 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     if chosen:
         # The selected cluster that was seen last is the one being tracked.
         best = max(chosen[:3], key=lambda c: scores.t_last[c])
+        if p.reacquire_join and snap.expected is not None and snap.newest is not None:
+            # The selected cluster (the reported track's earlier returns) ended before a
+            # fragment near where the track would be now began.
+            c = _track_cluster(*snap.expected, labels, xyz, t, snap.now - p.track_window)
+            if c is not None and c != best and scores.t_first[c] > scores.t_last[best]:
+                joined = _joined_track(best, c, labels, xyz, t, k, scorer, ps)
+                if joined is not None:
+                    return choice(joined[0], max(joined[1], float(p.min_confidence)), True, k)
         return choice(labels == best, float(scores.confidence[best]), True, k)
     if p.keep_confidence >= p.min_confidence or snap.expected is None:
         return choice(None, 0.0, False, k)
@@ -867,6 +881,12 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         mask = _hovering_track(c, predicted, labels, xyz, t, k, scorer, ps)
         if mask is not None:
             return choice(mask, float(p.min_confidence), False, k)
+    if p.reacquire_join and snap.newest is not None:
+        o = _track_owner(snap.newest, labels, xyz, t, p)
+        if o is not None and o != c:
+            joined = _joined_track(o, c, labels, xyz, t, k, scorer, ps)
+            if joined is not None:
+                return choice(joined[0], float(p.min_confidence), False, k)
     return choice(None, 0.0, False, k)
 
 
@@ -951,6 +971,69 @@ def _hovering_track(
     )
     if relaxed.candidate[c] and relaxed.confidence[c] >= scoring.keep_confidence:
         return labels == c
+    return None
+
+
+def _track_owner(
+    newest: tuple[float, np.ndarray],
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    params: ParamSet,
+) -> int | None:
+    """The cluster holding most points within ``track_gate`` of the reported track's
+    newest sample ``newest`` (time, position) over the ``track_window`` up to it, or
+    None."""
+    t_last, position = newest
+    mine = (t >= t_last - params.track_window) & (t <= t_last) & (labels >= 0)
+    mine[mine] = np.sum((xyz[mine].astype(np.float64) - position) ** 2, axis=1) <= (
+        params.track_gate**2
+    )
+    if not mine.any():
+        return None
+    return int(np.bincount(labels[mine]).argmax())
+
+
+def _joined_track(
+    o: int,
+    c: int,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    k: int,
+    scorer: Any,
+    scoring: ParamSet,
+) -> tuple[np.ndarray, float] | None:
+    """Hysteresis across a gap (``reacquire_join``): a drone's first returns after a gap
+    longer than the clusterer's linking form a cluster of their own (``c``, near where
+    the reported track would be now), too small and too short to pass the gates, while
+    the track's earlier returns sit in another (``o``). The two are scored as one cluster:
+    its acceleration and residual judge whether the fragment continues the track's path.
+    (mask of the joined cluster, its confidence) if it is a candidate with at least
+    ``keep_confidence``, else None. The scoring's windows do not span the gap, so the
+    fragment must also start where the track was heading: the straight-line fit over the
+    track's last ``track_window`` seconds, carried to the fragment's first return, within
+    ``track_gate`` plus ``link_max_accel`` x gap^2 / 2 of the fragment's first
+    ``frame_period``."""
+    p = scoring
+    track, fragment = labels == o, labels == c
+    t_end, t_start = float(t[track].max()), float(t[fragment].min())
+    gap = t_start - t_end
+    if not 0.0 < gap <= p.reacquire_window:
+        return None
+    end = np.flatnonzero(track & (t >= t_end - p.track_window))
+    end = end[np.argsort(t[end], kind="stable")]
+    slope, mean, tc = _track_line(t[end], xyz[end].astype(np.float64), np.ones(end.size), p)
+    start = fragment & (t <= t_start + p.frame_period)
+    first = xyz[start].astype(np.float64).mean(axis=0)
+    reach = p.track_gate + 0.5 * p.link_max_accel * gap * gap
+    if float(np.linalg.norm(mean + slope * (t_start - tc) - first)) > reach:
+        return None
+    joined = labels.copy()
+    joined[labels == c] = o
+    rescored = scorer(joined, xyz, t, params=scoring, n_clusters=k)
+    if rescored.candidate[o] and rescored.confidence[o] >= scoring.keep_confidence:
+        return joined == o, float(rescored.confidence[o])
     return None
 
 

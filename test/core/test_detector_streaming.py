@@ -10,7 +10,12 @@ import pytest
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
-from clusterfilter_ros.core.streaming import StreamingDetector, _track_samples, run_streaming
+from clusterfilter_ros.core.streaming import (
+    StreamingDetector,
+    _joined_track,
+    _track_samples,
+    run_streaming,
+)
 from clusterfilter_ros.errors import ParameterError
 
 
@@ -381,6 +386,90 @@ def test_a_lost_track_is_looked_for_where_it_would_be_now():
     det._last_reported = (t_last, position, velocity)
     det._now = t_last + 0.5
     assert det._expected_position(None) is None
+
+
+def _gap_frames(path, gap: tuple[float, float], duration: float = 16.0) -> list[Frame]:
+    """Mid360 frames of a wall and a drone on ``path`` (t -> (N, 3)) with no drone returns
+    during ``gap``."""
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(int(duration * 10)):
+        t = i * 0.1
+        wall = np.column_stack(
+            [
+                np.full(400, 40.0) + rng.normal(0, 0.02, 400),
+                rng.uniform(-20, 20, 400),
+                rng.uniform(0, 15, 400),
+            ]
+        )
+        parts = [wall]
+        if not gap[0] <= t < gap[1]:
+            parts.append(path(np.array([t]))[0] + rng.normal(0, 0.1, (3, 3)))
+        frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
+    return frames
+
+
+def test_a_track_resumes_after_a_gap_too_long_for_linking(drone_path_fn):
+    # 2.5 s without returns (link_max_gap 2 s): the returns after it form a cluster of
+    # their own, which alone would need seconds to be confirmed as a new track.
+    frames = _gap_frames(drone_path_fn, (8.0, 10.5))
+    resumed = run_streaming(frames, detector_params({"reacquire_join": True}))
+    fresh = run_streaming(frames, detector_params({"reacquire_join": False}))
+
+    def first_after_gap(estimates):
+        return min(e.stamp - 1000.0 for e in estimates if e.stamp - 1000.0 >= 10.5)
+
+    assert first_after_gap(resumed) < 11.0 < 12.5 < first_after_gap(fresh)
+    for e in resumed:
+        truth = drone_path_fn(np.array([e.stamp - 1000.0]))[0]
+        assert np.linalg.norm(e.position - truth) < 0.5
+    # Nothing changes before the gap.
+    before = [(e.stamp, tuple(e.position)) for e in resumed if e.stamp - 1000.0 < 10.5]
+    assert before == [(e.stamp, tuple(e.position)) for e in fresh if e.stamp - 1000.0 < 10.5]
+
+
+class _Scores:
+    """What _joined_track reads of a scoring: every cluster alike."""
+
+    def __init__(self, k: int, candidate: bool, confidence: float) -> None:
+        self.candidate = np.full(k, candidate)
+        self.confidence = np.full(k, confidence)
+
+
+def test_a_fragment_joins_the_track_only_where_it_was_heading_and_if_it_scores():
+    p = detector_params()
+    # The track (cluster 0): 3 returns a frame, 8 m/s along x, for 2 s.
+    t_track = np.repeat(np.arange(0.0, 2.0, 0.1), 3)
+    t_end = float(t_track.max())
+
+    def along(t: np.ndarray, side: float = 0.0) -> np.ndarray:
+        return np.column_stack([10.0 + 8.0 * t, np.full(t.size, 5.0 + side), np.full(t.size, 20.0)])
+
+    def join(gap: float, side: float = 0.0, candidate: bool = True, confidence: float = 0.3):
+        # The fragment (cluster 1): 0.5 s of returns from ``gap`` after the track's end,
+        # ``side`` metres off its line.
+        t_frag = np.repeat(np.arange(0.0, 0.5, 0.1), 3) + t_end + gap
+        t = np.concatenate([t_track, t_frag])
+        xyz = np.vstack([along(t_track), along(t_frag, side)]).astype(np.float32)
+        labels = np.repeat([0, 1], [t_track.size, t_frag.size])
+        scored = []
+
+        def scorer(joined, xyz_, t_, params, n_clusters):
+            scored.append(joined)
+            return _Scores(n_clusters, candidate, confidence)
+
+        return _joined_track(0, 1, labels, xyz, t, 2, scorer, p), scored
+
+    gap = 2.5
+    joined, scored = join(gap)
+    assert joined is not None and joined[0].all() and joined[1] == 0.3
+    assert (scored[0] == 0).all()  # scored as one cluster
+    reach = p.track_gate + 0.5 * p.link_max_accel * gap * gap
+    assert join(gap, 0.9 * reach)[0] is not None
+    assert join(gap, 1.1 * reach)[0] is None  # not where the track was heading
+    assert join(p.reacquire_window + 0.2)[0] is None
+    assert join(gap, candidate=False)[0] is None
+    assert join(gap, confidence=p.keep_confidence - 0.01)[0] is None
 
 
 # ------------------------------------------------------------ background re-clustering
