@@ -895,7 +895,8 @@ def _track_samples(
 ) -> list[_TrackSample]:
     """A track from the points in ``mask``: one sample per half frame period, skipping a
     sample that no object could have reached from the sample kept before it (deviation
-    39)."""
+    39), nor the track itself at the speed of its kept samples over the last
+    ``track_window`` (deviation 60)."""
     pts, tt = xyz[mask], t[mask]
     if tt.size == 0:
         return []
@@ -913,7 +914,18 @@ def _track_samples(
             # link_max_speed allows is another object the linking joined to the cluster
             # (a bird's returns at its end would become the track's newest).
             last = samples[-1]
-            reach = params.track_gate + params.link_max_speed * (sample.t - last.t)
+            dt = sample.t - last.t
+            reach = params.track_gate + params.link_max_speed * dt
+            # Nor one farther than the kept samples' own motion over the last
+            # track_window, with link_max_accel, allows.
+            j = len(samples) - 1
+            while j > 0 and samples[j - 1].t >= last.t - params.track_window:
+                j -= 1
+            span = last.t - samples[j].t
+            if span >= 2 * params.frame_period:
+                speed = float(np.linalg.norm(last.position - samples[j].position)) / span
+                own = params.track_gate + speed * dt + 0.5 * params.link_max_accel * dt * dt
+                reach = min(reach, own)
             if float(np.sum((sample.position - last.position) ** 2)) > reach * reach:
                 continue
         samples.append(sample)

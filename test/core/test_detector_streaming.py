@@ -171,6 +171,25 @@ def test_a_rebuilt_track_skips_samples_no_object_could_reach():
     assert len(_track_samples(np.ones(t.size, bool), fast, t, detector_params())) == t.size
 
 
+def test_a_rebuilt_track_skips_a_return_its_own_motion_could_not_reach():
+    # A drone hovering (one return every 0.5 s), then a bird's return 3 m away 0.43 s
+    # later: within track_gate + link_max_speed x dt (8.5 m), but not within what the
+    # hovering track itself could cover (track_gate + speed x dt + link_max_accel x dt^2
+    # / 2, 2.4 m). A drone leaving its hover at link_max_accel keeps every sample.
+    p = detector_params()
+    t = np.arange(0.0, 3.0, 0.5)
+    hover = np.tile([20.0, 1.4, 10.2], (t.size, 1))
+    xyz = np.vstack([hover, hover[-1] + [-2.0, 2.4, 0.8]]).astype(np.float32)
+    times = np.append(t, t[-1] + 0.43)
+    track = _track_samples(np.ones(times.size, bool), xyz, times, p)
+    assert [s.t for s in track] == pytest.approx(list(t))
+    dt = np.arange(0.0, 2.0, 0.1)
+    leaving = hover[-1] + np.outer(0.5 * p.link_max_accel * dt**2, [1.0, 0.0, 0.0])
+    xyz = np.vstack([hover, leaving[1:]]).astype(np.float32)
+    times = np.concatenate([t, t[-1] + dt[1:]])
+    assert len(_track_samples(np.ones(times.size, bool), xyz, times, p)) == times.size
+
+
 def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     times = np.arange(0.0, 2.0, 0.2)
     hover = [(10.0 + 0.01 * t, 5.0, 20.0) for t in times]
