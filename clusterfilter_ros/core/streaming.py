@@ -905,6 +905,7 @@ def _track_samples(
     order = np.argsort(bins, kind="stable")
     bins, pts, tt = bins[order], pts[order], tt[order]
     cuts = np.nonzero(np.diff(bins))[0] + 1
+    newest = float(tt.max())
     samples: list[_TrackSample] = []
     for idx in np.split(np.arange(bins.size), cuts):
         group = pts[idx]
@@ -914,22 +915,40 @@ def _track_samples(
             # link_max_speed allows is another object the linking joined to the cluster
             # (a bird's returns at its end would become the track's newest).
             last = samples[-1]
-            dt = sample.t - last.t
-            reach = params.track_gate + params.link_max_speed * dt
-            # Nor one farther than the kept samples' own motion over the last
-            # track_window, with link_max_accel, allows.
-            j = len(samples) - 1
-            while j > 0 and samples[j - 1].t >= last.t - params.track_window:
-                j -= 1
-            span = last.t - samples[j].t
-            if span >= 2 * params.frame_period:
-                speed = float(np.linalg.norm(last.position - samples[j].position)) / span
-                own = params.track_gate + speed * dt + 0.5 * params.link_max_accel * dt * dt
-                reach = min(reach, own)
+            reach = params.track_gate + params.link_max_speed * (sample.t - last.t)
             if float(np.sum((sample.position - last.position) ** 2)) > reach * reach:
+                continue
+            if sample.t >= newest - params.track_window and not _on_own_path(
+                samples, sample, params
+            ):
                 continue
         samples.append(sample)
     return samples
+
+
+def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSet) -> bool:
+    """Whether ``sample`` lies where the kept samples' own straight-line motion (over the
+    last ``track_window`` of them, at least the last three within ``link_max_gap``)
+    puts it, within ``track_gate`` plus ``link_max_accel`` x dt^2 / 2 for the time dt since
+    the newest of them (deviation 60). True while their motion is unknown (spanning less
+    than two frame periods)."""
+    p = params
+    last = kept[-1].t
+    j = len(kept) - 1
+    while j > 0 and kept[j - 1].t >= last - p.track_window:
+        j -= 1
+    if len(kept) - j < 3:
+        j = max(0, len(kept) - 3)
+        while j < len(kept) - 1 and kept[j].t < last - max(p.track_window, p.link_max_gap):
+            j += 1
+    if last - kept[j].t < 2 * p.frame_period:
+        return True
+    recent = kept[j:]
+    ts, ps, ws = _sample_arrays(recent)
+    slope, mean, tc = _track_line(ts, ps, ws, p)
+    dt = sample.t - last
+    reach = p.track_gate + 0.5 * p.link_max_accel * dt * dt
+    return float(np.sum((mean + slope * (sample.t - tc) - sample.position) ** 2)) <= reach * reach
 
 
 def _track_cluster(

@@ -171,11 +171,11 @@ def test_a_rebuilt_track_skips_samples_no_object_could_reach():
     assert len(_track_samples(np.ones(t.size, bool), fast, t, detector_params())) == t.size
 
 
-def test_a_rebuilt_track_skips_a_return_its_own_motion_could_not_reach():
+def test_a_rebuilt_track_skips_a_return_off_its_own_path():
     # A drone hovering (one return every 0.5 s), then a bird's return 3 m away 0.43 s
-    # later: within track_gate + link_max_speed x dt (8.5 m), but not within what the
-    # hovering track itself could cover (track_gate + speed x dt + link_max_accel x dt^2
-    # / 2, 2.4 m). A drone leaving its hover at link_max_accel keeps every sample.
+    # later: within track_gate + link_max_speed x dt (8.5 m) of the last sample, but not
+    # where the hovering track's own motion puts it (track_gate + link_max_accel x dt^2
+    # / 2: 2.4 m).
     p = detector_params()
     t = np.arange(0.0, 3.0, 0.5)
     hover = np.tile([20.0, 1.4, 10.2], (t.size, 1))
@@ -183,11 +183,39 @@ def test_a_rebuilt_track_skips_a_return_its_own_motion_could_not_reach():
     times = np.append(t, t[-1] + 0.43)
     track = _track_samples(np.ones(times.size, bool), xyz, times, p)
     assert [s.t for s in track] == pytest.approx(list(t))
+    # A drone leaving its hover at link_max_accel keeps every sample.
     dt = np.arange(0.0, 2.0, 0.1)
     leaving = hover[-1] + np.outer(0.5 * p.link_max_accel * dt**2, [1.0, 0.0, 0.0])
     xyz = np.vstack([hover, leaving[1:]]).astype(np.float32)
     times = np.concatenate([t, t[-1] + dt[1:]])
     assert len(_track_samples(np.ones(times.size, bool), xyz, times, p)) == times.size
+
+
+def test_one_stray_sample_does_not_take_the_track_off_its_path():
+    # A drone at 5 m/s seen every 0.1 s except for 0.3 s, when a bird 3.5 m off gives
+    # the cluster's only return: the bird's sample is skipped, and every later drone
+    # sample is kept (compared with the track's path, not with the sample kept last).
+    p = detector_params()
+    t = np.round(np.arange(0.0, 3.0, 0.1), 6)
+    t = t[(t < 1.95) | (t > 2.25)]
+    drone = np.column_stack([5.0 * t, np.full(t.size, 6.0), np.full(t.size, 18.0)])
+    bird_t = 2.1
+    bird = np.array([5.0 * bird_t - 3.0, 7.0, 19.5])
+    xyz = np.vstack([drone, bird]).astype(np.float32)
+    times = np.append(t, bird_t)
+    track = _track_samples(np.ones(times.size, bool), xyz, times, p)
+    assert [s.t for s in track] == pytest.approx(list(t))
+
+
+def test_only_the_newest_samples_are_held_to_the_tracks_own_path():
+    # Another object's returns at the cluster's start would make the path the drone's
+    # samples are compared with: the rule applies within track_window of the newest.
+    p = detector_params()
+    t = np.round(np.arange(0.0, 4.0, 0.1), 6)
+    xyz = np.column_stack([np.full(t.size, 7.7), np.full(t.size, 11.2), np.full(t.size, 11.1)])
+    xyz[:3] += [0.0, 2.5, 1.0]  # the first 0.3 s: something else 2.7 m away
+    track = _track_samples(np.ones(t.size, bool), xyz.astype(np.float32), t, p)
+    assert len(track) == t.size
 
 
 def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
