@@ -145,6 +145,21 @@ def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bo
     return float(np.linalg.norm(ends[0] - ends[1])) <= reach
 
 
+def _recent_samples(
+    samples: Iterable[_TrackSample], last: float, params: ParamSet
+) -> list[_TrackSample]:
+    """The samples (in time order) a fit ending at ``last`` uses: those of the last
+    ``track_window`` up to it or, for a sparse track, the last three within
+    ``link_max_gap``, so that a return after a gap is not averaged with the one before
+    it."""
+    p = params
+    recent = [s for s in samples if last - p.track_window <= s.t <= last]
+    if len(recent) < 3:
+        reach = last - max(p.track_window, p.link_max_gap)
+        recent = [s for s in samples if reach <= s.t <= last][-3:]
+    return recent
+
+
 def _sample_arrays(samples: list[_TrackSample]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(times, positions, point counts) of samples sorted by time."""
     return (
@@ -667,15 +682,7 @@ class StreamingDetector:
         if not newest:
             return None
         last = max(newest)
-        samples = [s for s in self._track if last - p.track_window <= s.t <= last]
-        if len(samples) < 3:
-            # A sparse track: the last three samples (within link_max_gap), so that a
-            # return after a gap is not averaged with the one before it.
-            reach = last - max(p.track_window, p.link_max_gap)
-            samples = [s for s in self._track if reach <= s.t <= last][-3:]
-        ts = np.array([s.t for s in samples])
-        ps = np.array([s.position for s in samples])
-        ws = np.array([float(s.points.shape[0]) for s in samples])
+        ts, ps, ws = _sample_arrays(_recent_samples(self._track, last, p))
         n = int(ws.sum())
         slope, mean, tc = _track_line(ts, ps, ws, p)
         age = stamp - last
@@ -895,8 +902,8 @@ def _track_samples(
 ) -> list[_TrackSample]:
     """A track from the points in ``mask``: one sample per half frame period, skipping a
     sample that no object could have reached from the sample kept before it (deviation
-    39), nor the track itself at the speed of its kept samples over the last
-    ``track_window`` (deviation 60)."""
+    39), and, within ``track_window`` of the newest return, one off the path of the
+    samples kept before it (:func:`_on_own_path`, deviation 60)."""
     pts, tt = xyz[mask], t[mask]
     if tt.size == 0:
         return []
@@ -934,17 +941,9 @@ def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSe
     than two frame periods)."""
     p = params
     last = kept[-1].t
-    j = len(kept) - 1
-    while j > 0 and kept[j - 1].t >= last - p.track_window:
-        j -= 1
-    if len(kept) - j < 3:
-        j = max(0, len(kept) - 3)
-        while j < len(kept) - 1 and kept[j].t < last - max(p.track_window, p.link_max_gap):
-            j += 1
-    if last - kept[j].t < 2 * p.frame_period:
+    ts, ps, ws = _sample_arrays(_recent_samples(kept, last, p))
+    if last - ts[0] < 2 * p.frame_period:
         return True
-    recent = kept[j:]
-    ts, ps, ws = _sample_arrays(recent)
     slope, mean, tc = _track_line(ts, ps, ws, p)
     dt = sample.t - last
     reach = p.track_gate + 0.5 * p.link_max_accel * dt * dt
