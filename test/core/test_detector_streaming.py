@@ -342,6 +342,13 @@ def test_persistence_map_is_the_same_with_one_hit_per_voxel_and_bin():
     assert np.array_equal(det._background.masks, raw.masks)
 
 
+def _wall(rng: np.random.Generator, n: int = 400) -> np.ndarray:
+    """One Mid360 frame's returns from a wall 40 m away."""
+    return np.column_stack(
+        [np.full(n, 40.0) + rng.normal(0, 0.02, n), rng.uniform(-20, 20, n), rng.uniform(0, 15, n)]
+    )
+
+
 def _hover_frames(
     duration: float = 30.0, thin_after: float = 15.0, strays_at: float | None = None
 ) -> list[Frame]:
@@ -353,14 +360,7 @@ def _hover_frames(
     frames, next_hit = [], 0.0
     for i in range(int(duration * 10)):
         t = i * 0.1
-        wall = np.column_stack(
-            [
-                np.full(400, 40.0) + rng.normal(0, 0.02, 400),
-                rng.uniform(-20, 20, 400),
-                rng.uniform(0, 15, 400),
-            ]
-        )
-        parts = [wall]
+        parts = [_wall(rng)]
         if t >= next_hit - 1e-9:
             parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, 0.05, (3, 3)))
             next_hit += 0.5 if t < thin_after else 0.7
@@ -442,14 +442,7 @@ def _gap_frames(path, gap: tuple[float, float], duration: float = 16.0) -> list[
     frames = []
     for i in range(int(duration * 10)):
         t = i * 0.1
-        wall = np.column_stack(
-            [
-                np.full(400, 40.0) + rng.normal(0, 0.02, 400),
-                rng.uniform(-20, 20, 400),
-                rng.uniform(0, 15, 400),
-            ]
-        )
-        parts = [wall]
+        parts = [_wall(rng)]
         if not gap[0] <= t < gap[1]:
             parts.append(path(np.array([t]))[0] + rng.normal(0, 0.1, (3, 3)))
         frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
