@@ -951,11 +951,12 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "reacquire_join",
         "bool",
         True,
-        "Streaming: when the cluster near where a reported track would be now fails "
-        "keep_confidence on its own (a few returns after a gap), score it joined with the "
-        "cluster holding the track's newest returns, and continue the track with the "
-        "joined cluster if that passes keep_confidence (within reacquire_window of the "
-        "track's newest return); false = the fragment must be confirmed as a new track.",
+        "Streaming: within reacquire_window of a reported track's newest return, a "
+        "cluster near where the track would be now that began after the track's cluster "
+        "ended (the returns after a pause longer than link_max_gap) is scored joined with "
+        "that cluster, and continues the track if its first returns lie where the track "
+        "was heading (track_gate + link_max_accel x gap^2 / 2) and the joined cluster "
+        "passes keep_confidence; false = such a fragment must be confirmed as a new track.",
     ),
     # --- streaming accumulator ---
     ParamSpec(
