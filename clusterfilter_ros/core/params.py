@@ -948,6 +948,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "report_lag_min_run",
+        "float",
+        0.5,
+        "report_lag: a frame is reported late only if the live output's run of estimates "
+        "(each within max_gap of the one before) that follows it lasted at least this "
+        "long (s), or is still going when the frame is due: an object the live output "
+        "reported for a moment is not reported over its whole history; 0 = off.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "reacquire_join",
         "bool",
         True,

@@ -738,6 +738,9 @@ class StreamingDetector:
             stamp = lagged.popleft()
             if self._last_live < stamp:
                 continue
+            shortest = self.params.report_lag_min_run
+            if shortest > 0 and self._live_run_seconds(stamp) < shortest:
+                continue
             if tracks is None:
                 tracks = self._delayed_tracks()
             for track in tracks:
@@ -748,6 +751,35 @@ class StreamingDetector:
                     self.delayed_dropped += len(self._ready) == self._ready.maxlen
                     self._ready.append(estimate)
                     break
+
+    def _live_run_seconds(self, stamp: float) -> float:
+        """How long the live output's run of estimates (each within ``max_gap`` of the one
+        before) that holds its first estimate at or after ``stamp`` lasted; inf while
+        that run is still going (its newest estimate is the newest, at most ``max_gap``
+        old), 0 if there is no estimate at or after ``stamp``."""
+        reports = self._live_reports
+        gap = self.params.max_gap
+        if not reports or reports[-1][0] < stamp:
+            return 0.0
+        # Walk back from the newest estimate, run by run, to the earliest run ending at or
+        # after ``stamp``.
+        newest = reports[-1][0]
+        end = start = newest
+        found = None  # (start, end) of the earliest run ending at or after stamp so far
+        for t, _ in reversed(reports):
+            if start - t <= gap:
+                start = t
+                continue
+            found = (start, end)
+            if t < stamp:
+                break
+            end = start = t
+        else:
+            found = (start, end)
+        run_start, run_end = found
+        if run_end == newest and self._now - newest <= gap:
+            return math.inf
+        return run_end - run_start
 
     def _delayed_tracks(self) -> list[_TrackPiece]:
         """The tracks delayed estimates come from, in order of preference: the current

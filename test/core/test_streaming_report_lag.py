@@ -214,7 +214,8 @@ def test_a_piece_continues_the_same_object_not_another_one():
 
 
 def _detector_with(archive, track_t=None):
-    det = StreamingDetector(detector_params({"report_lag": 5.0}))
+    # No live run length rule: these detectors have no record of live estimates.
+    det = StreamingDetector(detector_params({"report_lag": 5.0, "report_lag_min_run": 0.0}))
     det._archive.extend(archive)
     if track_t is not None:
         for t, xyz in zip(track_t, _line(track_t), strict=True):
@@ -401,3 +402,38 @@ def test_no_sample_within_reach_gives_none_not_an_error():
     params = detector_params({"max_extrapolation": 5.0, "track_window": 0.5, "link_max_gap": 1.0})
     ts = np.arange(0.0, 2.0, 0.1)
     assert smoothed_position(ts, _line(ts), np.ones(ts.size), 5.0, params) is None
+
+
+def test_an_object_reported_live_for_a_moment_is_not_reported_over_its_history(scene):
+    # The drone's returns stop at 4.2 s, just after the warm-up: the live output reports
+    # it from 4.0 to 4.7 s (0.7 s, coasting max_extrapolation past its last return).
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1004.2 else f for f in frames]
+    late = {}
+    for shortest in (0.0, 1.0):
+        values = {"report_lag": 3.0, "warmup": 4.0, "report_lag_min_run": shortest}
+        det = StreamingDetector(detector_params(values))
+        live, delayed, _ = _push_all(frames, det)
+        late[shortest] = [e.stamp - 1000.0 for e in delayed + det.flush()]
+        last_live = max(e.stamp for e in live) - 1000.0
+        assert 4.6 <= last_live <= 4.8
+    assert min(late[0.0]) < 1.1 and max(late[0.0]) == last_live  # its whole history
+    # With a 1 s minimum run: only the frames that fell due while the live run could
+    # still have gone on (up to max_gap after its newest estimate).
+    p = detector_params()
+    assert late[1.0] == [s for s in late[0.0] if s + 3.0 <= last_live + p.max_gap + 1e-6]
+
+
+def test_live_run_seconds_finds_the_run_after_a_stamp():
+    det = StreamingDetector(detector_params({"report_lag": 3.0}))
+    first = [round(0.1 * i, 1) for i in range(11)]  # 0.0-1.0 s
+    second = [3.0, 3.1, 3.2]  # 2 s later: a run of its own
+    det._live_reports.extend((s, np.zeros(3)) for s in first + second)
+    det._now = 6.0
+    assert det._live_run_seconds(0.5) == 1.0
+    assert det._live_run_seconds(1.5) == 3.2 - 3.0
+    assert det._live_run_seconds(3.1) == 3.2 - 3.0
+    assert det._live_run_seconds(3.5) == 0.0  # nothing reported after it
+    det._now = 3.5  # the second run may still go on
+    assert det._live_run_seconds(1.5) == np.inf
+    assert det._live_run_seconds(0.5) == 1.0
