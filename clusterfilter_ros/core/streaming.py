@@ -765,7 +765,7 @@ class StreamingDetector:
         # after ``stamp``.
         newest = reports[-1][0]
         end = start = newest
-        found = None  # (start, end) of the earliest run ending at or after stamp so far
+        found = (start, end)  # the earliest run ending at or after stamp so far
         for t, _ in reversed(reports):
             if start - t <= gap:
                 start = t
