@@ -921,7 +921,9 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         if mask is not None:
             return choice(mask, float(p.min_confidence), False, k)
     if p.reacquire_join and snap.newest is not None:
-        o = _track_owner(snap.newest, labels, xyz, t, p)
+        # The cluster holding the track's newest returns.
+        t_last, position = snap.newest
+        o = _track_cluster(position, p.track_gate, labels, xyz, t, t_last - p.track_window, t_last)
         if o is not None and o != c:
             joined = _joined_track(o, c, labels, xyz, t, k, scorer, ps)
             if joined is not None:
@@ -976,10 +978,26 @@ def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSe
     ts, ps, ws = _sample_arrays(_recent_samples(kept, last, p))
     if last - ts[0] < 2 * p.frame_period:
         return True
+    return _reaches(ts, ps, ws, last, sample.t, sample.position, p)
+
+
+def _reaches(
+    ts: np.ndarray,
+    ps: np.ndarray,
+    ws: np.ndarray,
+    since: float,
+    t: float,
+    position: np.ndarray,
+    params: ParamSet,
+) -> bool:
+    """Whether the straight line through track samples (:func:`_track_line`), carried to
+    ``t``, passes within ``track_gate`` plus ``link_max_accel`` x (t - since)^2 / 2 of
+    ``position``: an object on that path at ``since`` could be there at ``t``."""
+    p = params
     slope, mean, tc = _track_line(ts, ps, ws, p)
-    dt = sample.t - last
+    dt = t - since
     reach = p.track_gate + 0.5 * p.link_max_accel * dt * dt
-    return float(np.sum((mean + slope * (sample.t - tc) - sample.position) ** 2)) <= reach * reach
+    return float(np.linalg.norm(mean + slope * (t - tc) - position)) <= reach
 
 
 def _track_cluster(
@@ -989,10 +1007,11 @@ def _track_cluster(
     xyz: np.ndarray,
     t: np.ndarray,
     since: float,
+    until: float = math.inf,
 ) -> int | None:
-    """The cluster holding most of the points since ``since`` within ``gate`` of
-    ``predicted``, or None."""
-    recent = (t >= since) & (labels >= 0)
+    """The cluster holding most of the points from ``since`` (to ``until``) within
+    ``gate`` of ``predicted``, or None."""
+    recent = (t >= since) & (t <= until) & (labels >= 0)
     near = recent & (np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1) <= gate**2)
     if not near.any():
         return None
@@ -1036,26 +1055,6 @@ def _hovering_track(
     return None
 
 
-def _track_owner(
-    newest: tuple[float, np.ndarray],
-    labels: np.ndarray,
-    xyz: np.ndarray,
-    t: np.ndarray,
-    params: ParamSet,
-) -> int | None:
-    """The cluster holding most points within ``track_gate`` of the reported track's
-    newest sample ``newest`` (time, position) over the ``track_window`` up to it, or
-    None."""
-    t_last, position = newest
-    mine = (t >= t_last - params.track_window) & (t <= t_last) & (labels >= 0)
-    mine[mine] = np.sum((xyz[mine].astype(np.float64) - position) ** 2, axis=1) <= (
-        params.track_gate**2
-    )
-    if not mine.any():
-        return None
-    return int(np.bincount(labels[mine]).argmax())
-
-
 def _joined_track(
     o: int,
     c: int,
@@ -1085,11 +1084,10 @@ def _joined_track(
         return None
     end = np.flatnonzero(track & (t >= t_end - p.track_window))
     end = end[np.argsort(t[end], kind="stable")]
-    slope, mean, tc = _track_line(t[end], xyz[end].astype(np.float64), np.ones(end.size), p)
     start = fragment & (t <= t_start + p.frame_period)
     first = xyz[start].astype(np.float64).mean(axis=0)
-    reach = p.track_gate + 0.5 * p.link_max_accel * gap * gap
-    if float(np.linalg.norm(mean + slope * (t_start - tc) - first)) > reach:
+    ends = (t[end], xyz[end].astype(np.float64), np.ones(end.size))
+    if not _reaches(*ends, t_end, t_start, first, p):
         return None
     joined = labels.copy()
     joined[labels == c] = o
