@@ -503,10 +503,14 @@ def motion_coherence(
 
 
 def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int) -> np.ndarray:
-    """Per cluster: RMS distance (m) of points to the mean of their frame bin.
+    """Per cluster: RMS distance (m) of points to the mean of their frame bin, over all
+    of the cluster's points.
 
-    Only (cluster, frame) pairs with at least 2 points count; 0 for clusters with none.
-    """
+    A point alone in its frame bin counts with distance 0: its scatter within the frame
+    cannot be seen, so none of its distance from a fitted path is put down to it. (Averaged
+    over the points of frames with at least 2 points only, as before deviation 61, the
+    sparse returns of a far wall, most alone in their frame and a few pairs metres apart,
+    had a "spread" as large as their residual.) 0 for clusters with no such pair."""
     if lab.size == 0:
         return np.zeros(k)
     nb = int(frame_bin.max()) + 1
@@ -515,9 +519,8 @@ def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int
     n = np.bincount(inv).astype(np.float64)
     c = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1) / n[:, None]
     d2 = np.einsum("na,na->n", pts - c[inv], pts - c[inv])
-    m = n[inv] >= 2
-    cnt = np.bincount(lab[m], minlength=k)
-    return np.sqrt(np.bincount(lab[m], weights=d2[m], minlength=k) / np.maximum(cnt, 1))
+    cnt = np.bincount(lab, minlength=k)
+    return np.sqrt(np.bincount(lab, weights=d2, minlength=k) / np.maximum(cnt, 1))
 
 
 #: Fewest points for a residual window to count (a quadratic in 3 axes has 9 unknowns).

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from clusterfilter_ros.core.params import detector_params
-from clusterfilter_ros.core.scoring import score_clusters, track_residual
+from clusterfilter_ros.core.scoring import frame_spread, score_clusters, track_residual
 
 
 def _track(erratic: bool, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -80,6 +80,39 @@ def test_frame_spread_explains_body_size_not_wander() -> None:
     assert scores.excess_residual[1] > params.max_excess
     assert scores.confidence[1] == 0.0
     assert scores.confidence[0] > 0.0
+
+
+def test_frame_spread_counts_points_alone_in_their_frame() -> None:
+    # Frame 0 holds two points 2 m apart (1 m from their mean), frames 1-6 one point each:
+    # over all eight points the RMS is sqrt(2 / 8) = 0.5 m, not the pair's 1 m.
+    pts = np.array([[0.0, 0, 10], [2.0, 0, 10]] + [[0.5 * i, 0, 10] for i in range(1, 7)])
+    lab = np.zeros(8, np.int64)
+    frame_bin = np.array([0, 0, 1, 2, 3, 4, 5, 6])
+    assert frame_spread(lab, pts, frame_bin, 1)[0] == pytest.approx(0.5)
+    # A cluster with one point per frame has no visible spread at all.
+    assert frame_spread(lab[1:], pts[1:], frame_bin[1:], 1)[0] == 0.0
+
+
+def test_sparse_far_wall_returns_keep_their_excess_residual() -> None:
+    """The sparse returns of a far wall, linked into a slow "track": one return in most
+    frames, wandering 1.5 m off any smooth path, and a few frames with two returns 8 m
+    apart. Those pairs must not excuse the wander as the object's own size (the spread
+    averaged over the pairs alone was 4 m, above the 3.2 m residual: excess 0 and
+    confidence 0.15)."""
+    rng = np.random.default_rng(5)
+    t1 = np.arange(0.0, 20.0, 0.5)
+    path = np.stack([np.full_like(t1, 78.0), -48.0 - 0.3 * t1, 10.0 + 0.2 * t1], axis=1)
+    p1 = path + rng.normal(0.0, 1.5 / np.sqrt(3.0), size=path.shape) * [0.0, 1.0, 1.0]
+    t2 = np.repeat([2.05, 7.05, 12.05, 17.05], 2)
+    p2 = np.stack([np.full_like(t2, 78.0), -48.0 - 0.3 * t2, 10.0 + 0.2 * t2], axis=1)
+    p2[:, 2] += np.tile([-4.0, 4.0], 4)
+    t = np.concatenate([t1, t2])
+    xyz = np.concatenate([p1, p2])
+    params = detector_params()
+    scores = score_clusters(np.zeros(t.size, np.int64), xyz, t, params, n_clusters=1)
+    assert scores.residual[0] > 1.0
+    assert scores.excess_residual[0] > params.max_excess
+    assert scores.confidence[0] == 0.0
 
 
 def test_window_with_two_instants_gives_no_evidence():
