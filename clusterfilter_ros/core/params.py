@@ -350,7 +350,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "hover_min_frames",
         "int",
         15,
-        "Frames with points a compact motionless cluster needs to count as a hovering drone.",
+        "Frames a compact motionless cluster needs to count as a hovering drone, each with "
+        "its returns' mean within hover_max_extent / 2 of the cluster's median position.",
         minimum=1,
         maximum=100000,
     ),
@@ -358,8 +359,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "hover_min_seconds",
         "float",
         2.0,
-        "Time span (s) a compact cluster needs to count as a hovering drone: a dense "
-        "object close to the rig fills hover_min_frames (0.1 s bins) in 1.5 s while passing.",
+        "Time span (s) a compact cluster needs to count as a hovering drone (between the "
+        "first and last of the frames hover_min_frames counts): a dense object close to the "
+        "rig fills hover_min_frames (0.1 s bins) in 1.5 s while passing.",
         minimum=0.0,
         maximum=60.0,
     ),

@@ -364,10 +364,16 @@ def score_clusters(
             quantiles = [group_quantiles(lab, pts[:, a], k, (0.9, 0.1, 0.5)) for a in range(3)]
             core_extent = np.max([q[0] - q[1] for q in quantiles], axis=0)
             median_position = np.stack([q[2] for q in quantiles], axis=1)
+            # Counted in frames, not returns: a bird crossing over the rig can leave most of
+            # its returns in the few frames in which the Avia's pattern caught it, within
+            # a metre or two, and one return in each of its other frames (deviation 62).
+            frames_in_place, span_in_place = frames_near(
+                lab, pts, tt, frame_bin, median_position, 0.5 * float(params.hover_max_extent), k
+            )
             hovering = (
                 (core_extent <= params.hover_max_extent)
-                & (res.support_frames >= params.hover_min_frames)
-                & (span >= float(params.hover_min_seconds))
+                & (frames_in_place >= params.hover_min_frames)
+                & (span_in_place >= float(params.hover_min_seconds))
             )
             if structure_keys is not None and structure_keys.size and hovering.any():
                 contact = structure_contact(
@@ -500,6 +506,36 @@ def motion_coherence(
     coh = 1.0 - local_sum / np.maximum(overall_sum, 1e-9)
     out[:] = np.where(multi_windows >= 2, np.clip(coh, 0.0, 1.0), 0.0)
     return out
+
+
+def frames_near(
+    lab: np.ndarray,
+    pts: np.ndarray,
+    t: np.ndarray,
+    frame_bin: np.ndarray,
+    position: np.ndarray,
+    reach: float,
+    k: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per cluster: (number of frame bins, seconds between the first and the last of
+    them) whose mean position lies within ``reach`` of ``position[cluster]`` on every
+    axis; the bins' times are their returns' mean stamps."""
+    nb = int(frame_bin.max()) + 1
+    u, inv = voxel.unique_ints(lab * nb + frame_bin, return_inverse=True)
+    inv = inv.reshape(-1)
+    n = np.bincount(inv).astype(np.float64)
+    mean = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1)
+    mean /= n[:, None]
+    owner = u // nb
+    near = np.abs(mean - position[owner]).max(axis=1) <= reach
+    owner = owner[near]
+    stamp = (np.bincount(inv, weights=t) / n)[near]
+    count = np.bincount(owner, minlength=k)
+    first = np.full(k, np.inf)
+    last = np.full(k, -np.inf)
+    np.minimum.at(first, owner, stamp)
+    np.maximum.at(last, owner, stamp)
+    return count, np.where(count > 0, last - first, 0.0)
 
 
 def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int) -> np.ndarray:
