@@ -490,22 +490,31 @@ def motion_coherence(
     )
     win = np.floor((t - (t.min() if origin is None else origin)) / window).astype(np.int64)
     win -= win.min()
-    n_win = int(win.max()) + 1
-    cw_u, cw_inv = voxel.unique_ints(lab * n_win + win, return_inverse=True)
-    cw_inv = cw_inv.reshape(-1)
-    cw_n = np.bincount(cw_inv).astype(np.float64)
-    cw_c = np.stack([np.bincount(cw_inv, weights=pts[:, a]) for a in range(3)], axis=1)
-    cw_c /= cw_n[:, None]
+    cw_owner, cw_inv, cw_n, cw_c = bin_means(lab, win, pts)
     # Only windows with >= 2 points say anything about scatter within a window.
     multi = cw_n[cw_inv] >= 2
     local = np.linalg.norm(pts - cw_c[cw_inv], axis=1)
     overall = np.linalg.norm(pts - centroid[lab], axis=1)
     local_sum = np.bincount(lab[multi], weights=local[multi], minlength=k)
     overall_sum = np.bincount(lab[multi], weights=overall[multi], minlength=k)
-    multi_windows = np.bincount((cw_u // n_win)[cw_n >= 2], minlength=k)
+    multi_windows = np.bincount(cw_owner[cw_n >= 2], minlength=k)
     coh = 1.0 - local_sum / np.maximum(overall_sum, 1e-9)
     out[:] = np.where(multi_windows >= 2, np.clip(coh, 0.0, 1.0), 0.0)
     return out
+
+
+def bin_means(
+    lab: np.ndarray, bins: np.ndarray, pts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The (cluster, bin) pairs holding points, for per-point cluster ids and
+    non-negative bin numbers (frames, time windows): (cluster id of each pair (P,),
+    pair index of each point (N,), points per pair (P,), mean position per pair (P, 3))."""
+    nb = int(bins.max()) + 1
+    u, inv = voxel.unique_ints(lab * nb + bins, return_inverse=True)
+    inv = inv.reshape(-1)
+    n = np.bincount(inv).astype(np.float64)
+    mean = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1) / n[:, None]
+    return u // nb, inv, n, mean
 
 
 def frames_near(
@@ -520,13 +529,7 @@ def frames_near(
     """Per cluster: (number of frame bins, seconds between the first and the last of
     them) whose mean position lies within ``reach`` of ``position[cluster]`` on every
     axis; the bins' times are their returns' mean stamps."""
-    nb = int(frame_bin.max()) + 1
-    u, inv = voxel.unique_ints(lab * nb + frame_bin, return_inverse=True)
-    inv = inv.reshape(-1)
-    n = np.bincount(inv).astype(np.float64)
-    mean = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1)
-    mean /= n[:, None]
-    owner = u // nb
+    owner, inv, n, mean = bin_means(lab, frame_bin, pts)
     near = np.abs(mean - position[owner]).max(axis=1) <= reach
     owner = owner[near]
     stamp = (np.bincount(inv, weights=t) / n)[near]
@@ -549,11 +552,7 @@ def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int
     had a "spread" as large as their residual.) 0 for clusters with no such pair."""
     if lab.size == 0:
         return np.zeros(k)
-    nb = int(frame_bin.max()) + 1
-    u, inv = voxel.unique_ints(lab * nb + frame_bin, return_inverse=True)
-    inv = inv.reshape(-1)
-    n = np.bincount(inv).astype(np.float64)
-    c = np.stack([np.bincount(inv, weights=pts[:, a]) for a in range(3)], axis=1) / n[:, None]
+    _, inv, _, c = bin_means(lab, frame_bin, pts)
     d2 = np.einsum("na,na->n", pts - c[inv], pts - c[inv])
     cnt = np.bincount(lab, minlength=k)
     return np.sqrt(np.bincount(lab, weights=d2, minlength=k) / np.maximum(cnt, 1))
