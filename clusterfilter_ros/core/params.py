@@ -370,8 +370,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "int",
         11,
         "Streaming: a hovering track being reported stays reported while its cluster has "
-        "this many frames with points (hysteresis with keep_confidence; a new one needs "
-        "hover_min_frames); values >= hover_min_frames switch this off.",
+        "this many frames in place, counted as for hover_min_frames (hysteresis with "
+        "keep_confidence; a new one needs hover_min_frames); values >= hover_min_frames "
+        "switch this off.",
         minimum=1,
         maximum=100000,
     ),
