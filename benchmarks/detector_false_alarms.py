@@ -25,11 +25,36 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from detector_accuracy import SIM_CACHE, load_sim, run_case  # noqa: E402
 
 HIT_RADIUS = 2.0  # m: the evaluator's detection radius
+NEAR = 3.0  # m: labelled returns this close to a report vote for its class
+WINDOW = 0.3  # s: from frames this close in time
+
+
+def attribute(sim, pred) -> collections.Counter:
+    """Reports (``TimedPositions`` with the prism offset added) counted by the class of
+    the labelled returns near them; in a recording with a drone only those at least
+    ``HIT_RADIUS`` from its ground truth."""
+    from clusterfilter_ros.sim.raycast import CLASS_NAMES
+
+    frames = sim.sequence.frames
+    stamps = np.array([f.stamp for f in frames])
+    offset = np.asarray(sim.prism_offset, dtype=np.float64)
+    truth = sim.drone_truth
+    counts: collections.Counter = collections.Counter()
+    for t, p in zip(pred.stamps, pred.xyz, strict=True):
+        if len(truth):
+            at = np.array([np.interp(t, truth.stamps, truth.xyz[:, a]) for a in range(3)])
+            if np.linalg.norm(p - at - offset) < HIT_RADIUS:
+                continue
+        votes = np.zeros(len(CLASS_NAMES))
+        for i in np.flatnonzero(np.abs(stamps - t) <= WINDOW):
+            near = np.linalg.norm(frames[i].xyz - (p - offset), axis=1) < NEAR
+            cls = np.asarray(sim.classes[i])[near].astype(int)
+            votes += np.bincount(cls, minlength=len(CLASS_NAMES))[: len(CLASS_NAMES)]
+        counts[CLASS_NAMES.get(int(votes.argmax()), "?") if votes.any() else "none"] += 1
+    return counts
 
 
 def main(argv=None) -> int:
-    from clusterfilter_ros.sim.raycast import CLASS_NAMES
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="+", default=["no_drone", "no_drone_birds"])
     ap.add_argument("--seeds", nargs="+", type=int, default=[100, 101, 102])
@@ -41,24 +66,9 @@ def main(argv=None) -> int:
     for scenario in args.scenarios:
         for seed in args.seeds:
             sim = load_sim(scenario, seed, args.cache)
-            frames = sim.sequence.frames
-            stamps = np.array([f.stamp for f in frames])
-            truth = sim.drone_truth
             for mode in args.modes:
                 _, pred, _ = run_case(sim, mode, {})
-                counts: collections.Counter = collections.Counter()
-                for t, p in zip(pred.stamps, pred.xyz, strict=True):
-                    if len(truth):
-                        at = [np.interp(t, truth.stamps, truth.xyz[:, a]) for a in range(3)]
-                        if np.linalg.norm(p - np.asarray(at) - sim.prism_offset) < HIT_RADIUS:
-                            continue
-                    votes = np.zeros(len(CLASS_NAMES) + 1)
-                    for i in np.nonzero(np.abs(stamps - t) <= 0.3)[0]:
-                        near = np.linalg.norm(frames[i].xyz - (p - sim.prism_offset), axis=1) < 3
-                        cls = sim.classes[i][near].astype(int)
-                        votes[: len(CLASS_NAMES)] += np.bincount(cls, minlength=len(CLASS_NAMES))
-                    name = CLASS_NAMES.get(int(votes.argmax()), "?") if votes.any() else "none"
-                    counts[name] += 1
+                counts = attribute(sim, pred)
                 total.update(counts)
                 print(f"{scenario} seed {seed} {mode}: {dict(counts)}")
     n = sum(total.values())
