@@ -316,10 +316,8 @@ def score_clusters(
         origin = float(tt.min()) if t0 is None else float(t0)
         fp = float(params.frame_period)
         frame_bin = np.floor((tt - origin) / fp + 1e-6).astype(np.int64)
-        fb = voxel.unique_ints(lab * (int(frame_bin.max()) + 1) + frame_bin)
-        res.support_frames = np.bincount(fb // (int(frame_bin.max()) + 1), minlength=k).astype(
-            np.float64
-        )
+        frames = bin_means(lab, frame_bin, pts)
+        res.support_frames = np.bincount(frames[0], minlength=k).astype(np.float64)
         sums = {n: np.zeros(k) for n in _SUMS}
         for i, w in enumerate(sorted(params.frames)):
             part = local_window_features(
@@ -368,7 +366,7 @@ def score_clusters(
             # its returns in the few frames in which the Avia's pattern caught it, within
             # a metre or two, and one return in each of its other frames (deviation 62).
             frames_in_place, span_in_place = frames_near(
-                lab, pts, tt, frame_bin, median_position, 0.5 * float(params.hover_max_extent), k
+                frames, tt, median_position, 0.5 * float(params.hover_max_extent), k
             )
             hovering = (
                 (core_extent <= params.hover_max_extent)
@@ -518,18 +516,17 @@ def bin_means(
 
 
 def frames_near(
-    lab: np.ndarray,
-    pts: np.ndarray,
+    frames: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     t: np.ndarray,
-    frame_bin: np.ndarray,
     position: np.ndarray,
     reach: float,
     k: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per cluster: (number of frame bins, seconds between the first and the last of
     them) whose mean position lies within ``reach`` of ``position[cluster]`` on every
-    axis; the bins' times are their returns' mean stamps."""
-    owner, inv, n, mean = bin_means(lab, frame_bin, pts)
+    axis. ``frames``: :func:`bin_means` of the points' clusters and frame bins; ``t``:
+    the points' stamps (a bin's time is its returns' mean stamp)."""
+    owner, inv, n, mean = frames
     near = np.abs(mean - position[owner]).max(axis=1) <= reach
     owner = owner[near]
     stamp = (np.bincount(inv, weights=t) / n)[near]
