@@ -226,7 +226,11 @@ def select_trimmed(
     """Selected clusters plus the qualifying candidates that :func:`select_clusters` left
     out for overlapping a selected one in time, each trimmed to its points outside the
     time spans already taken, if those still hold ``min_cluster_points`` points over at
-    least ``min_track_seconds`` (the confirmation a whole track needs).
+    least ``min_track_seconds`` (the confirmation a whole track needs). A cluster takes
+    the time where it has returns (within its span in ``scores``), not the gaps of more
+    than ``link_max_gap`` between them: a hovering drone's cluster joins co-located
+    pieces seconds apart, and the piece of the drone split from a bird that passed it
+    in such a gap fills the gap (deviation 64).
 
     Where a bird flies past the drone, the kinematic split (deviation 34) can end one
     drone track and start the next in the middle of the other: the later, better track
@@ -242,7 +246,11 @@ def select_trimmed(
     rank = scores.rank_score(params.scoring)
     labels = labels.copy()
     chosen = list(selected)
-    spans = [(float(scores.t_first[c]), float(scores.t_last[c])) for c in chosen]
+    gap = float(params.link_max_gap)
+    spans = []
+    for c in chosen:
+        tc = t[labels == c]
+        spans += occupied_spans(tc[(tc >= scores.t_first[c]) & (tc <= scores.t_last[c])], gap)
     order = np.argsort(-rank, kind="stable")
     for c in order[qualifies[order]]:
         c = int(c)
@@ -258,8 +266,19 @@ def select_trimmed(
         labels[member[covered]] = -1
         trimmed[member[covered]] = True
         chosen.append(c)
-        spans.append((float(t[rest].min()), float(t[rest].max())))
+        spans += occupied_spans(t[rest], gap)
     return labels, chosen, trimmed
+
+
+def occupied_spans(t: np.ndarray, max_gap: float) -> list[tuple[float, float]]:
+    """(first, last) stamp of each run of the stamps ``t`` with no gap over ``max_gap``."""
+    t = np.sort(np.asarray(t, dtype=np.float64).reshape(-1))
+    if t.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(t) > max_gap)
+    starts = np.concatenate([[0], cut + 1])
+    ends = np.concatenate([cut, [t.size - 1]])
+    return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends, strict=True)]
 
 
 #: Seconds at each end of a selected cluster averaged for its end positions...

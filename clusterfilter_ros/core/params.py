@@ -556,11 +556,12 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "split_min_extent",
         "float",
-        1.0,
+        0.5,
         "Splitting merged clusters, offline (streaming: stream_split_min_extent): a flying "
         "cluster wider than this (m, mean extent in its shortest local windows) and below "
         "min_confidence is split too; one wider than max_local_extent always is. A bird "
-        "linked into a drone's track for a second or two widens it only 1.1-1.9 m.",
+        "linked into a drone's track for a second or two widens it only 1.1-1.9 m, a few "
+        "returns of a bird passing a hovering drone 0.6 m.",
         minimum=0.1,
         maximum=1000.0,
     ),

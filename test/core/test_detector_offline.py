@@ -9,6 +9,7 @@ import numpy as np
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.offline import (
     detect_offline,
+    occupied_spans,
     reachable_pieces,
     select_trimmed,
     tracked_spans,
@@ -126,6 +127,38 @@ def test_a_trimmed_rest_must_be_a_confirmed_track_and_paper_mode_keeps_one():
     paper = params.copy(scoring="paper")
     out, chosen, trimmed = select_trimmed(labels, t, scores, [1], paper)
     assert chosen == [1] and not trimmed.any()
+
+
+def test_a_confident_piece_in_a_gap_of_the_selected_cluster_is_kept():
+    # Cluster 1: a hovering drone's co-located pieces 0-4 s and 12-16 s, one cluster;
+    # cluster 0: the drone in between, split off a bird that passed it (hover seed 1705).
+    params = detector_params()
+    t1 = np.concatenate([np.arange(0.0, 4.0, 0.1), np.arange(12.0, 16.0, 0.1)])
+    t0 = np.arange(5.0, 11.0, 0.2)
+    t = np.concatenate([t0, t1])
+    xyz = np.tile(np.array([[4.5, 18.0, 10.0]], np.float32), (t.size, 1))
+    labels = np.repeat([0, 1], [t0.size, t1.size])
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    scores = dataclasses.replace(
+        scores, candidate=np.array([True, True]), confidence=np.array([0.9, 1.0])
+    )
+    selected = select_clusters(scores, params)
+    assert selected == [1]  # cluster 0 lies inside cluster 1's span
+    out, chosen, trimmed = select_trimmed(labels, t, scores, selected, params)
+    assert chosen == [1, 0] and not trimmed.any() and np.array_equal(out, labels)
+    # A gap no longer than link_max_gap still counts as taken.
+    out, chosen, trimmed = select_trimmed(
+        labels, t, scores, selected, params.copy(link_max_gap=10.0)
+    )
+    assert chosen == [1] and not trimmed.any()
+
+
+def test_occupied_spans_break_at_gaps_over_the_limit():
+    assert occupied_spans(np.array([3.0, 0.0, 1.0, 1.5, 7.0]), 1.5) == [
+        (0.0, 3.0),
+        (7.0, 7.0),
+    ]
+    assert occupied_spans(np.empty(0), 1.0) == []
 
 
 def test_pieces_no_drone_could_join_are_not_one_track():
