@@ -16,6 +16,10 @@ was heading:
   velocity, whichever is smaller) is within ``link_gate + link_max_accel * dt^2 / 2``
   (never more than ``link_gate + link_max_speed * dt``); two fragments without a velocity
   link only across one frame period, by the distance between A's end and B's start;
+- a fragment's first or last sample that is a single return lying beyond the linking
+  reach of where the fragment's next ``link_fit_window`` of samples inward was heading
+  (another object's return the clusterer joined to it) does not define that end; the
+  reach is then still that of the gap between the two fragments' returns;
 - candidates are taken greedily, best first (distance relative to the reach plus gap
   relative to ``link_max_gap``, so that the next fragment in time is not skipped), each
   cluster getting at most one successor and one predecessor, so a chain is one object's
@@ -130,6 +134,38 @@ def _line_fits(
     return tm, pm, vel, has_v
 
 
+def _stray_ends(
+    cid: np.ndarray, ts: np.ndarray, ps: np.ndarray, w: np.ndarray, k: int, params: ParamSet
+) -> np.ndarray:
+    """(S,) bool over the frame samples (sorted by cluster, then time): each cluster's
+    first or last sample when it is a single return farther than the linking reach from
+    where the cluster's next ``link_fit_window`` of samples inward was heading (line fit
+    with a velocity, over at least two other samples)."""
+    stray = np.zeros(ts.size, dtype=bool)
+    n = np.bincount(cid, minlength=k)
+    first = np.concatenate([[0], np.cumsum(n)[:-1]])
+    last = first + n - 1
+    win = float(params.link_fit_window)
+    idx = np.arange(ts.size)
+    if ts.size == 0:
+        return stray
+    for edge, inner, sign in ((last, last - 1, 1.0), (first, first + 1, -1.0)):
+        # Indices clipped for clusters with fewer than three samples, which are not judged.
+        edge, inner = np.clip(edge, 0, ts.size - 1), np.clip(inner, 0, ts.size - 1)
+        judged = (n >= 3) & (w[edge] == 1)
+        if not judged.any():
+            continue
+        e, i = edge[cid], inner[cid]
+        sel = judged[cid] & (idx != e) & (sign * (ts[i] - ts) <= win)
+        tm, pm, vel, has_v = _line_fits(cid, ts, ps, w, sel, k)
+        c = np.flatnonzero(judged & has_v)
+        gap = np.abs(ts[edge[c]] - ts[inner[c]])
+        heading = pm[c] + vel[c] * (ts[edge[c]] - tm[c])[:, None]
+        off = np.linalg.norm(ps[edge[c]] - heading, axis=1)
+        stray[edge[c[off > linking_reach(gap, params)]]] = True
+    return stray
+
+
 class _Ends(NamedTuple):
     """Per cluster: first / last stamp, start / end position and velocity (with whether
     the velocity is known, and its norm)."""
@@ -144,20 +180,28 @@ class _Ends(NamedTuple):
     has_e: np.ndarray
     speed_s: np.ndarray
     speed_e: np.ndarray
+    first_seen: np.ndarray  # first / last stamp with the stray ends kept
+    last_seen: np.ndarray
 
 
 def _linkable(
     aa: np.ndarray, b: np.ndarray, ends: _Ends, params: ParamSet
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The candidate pairs (a, b) that may link, and their costs."""
-    t_first, t_last, start_pos, end_pos, v_s, v_e, has_s, has_e, speed_s, speed_e = ends
+    t_first, t_last, start_pos, end_pos, v_s, v_e, has_s, has_e, speed_s, speed_e = ends[:10]
     fp = float(params.frame_period)
     gap = float(params.link_max_gap)
     dt = t_first[b] - t_last[aa]
     adt = np.abs(dt)
     known_a, known_b = has_e[aa], has_s[b]
     any_v = known_a | known_b
-    reach = linking_reach(adt, params)
+    # A stray end left out moves the end back in time, not the object: the reach is at
+    # most that of the gap between the fragments' returns (fast_pass seed 1604: a crown's
+    # three returns otherwise joined the drone's track 1.7 s later).
+    reach = np.minimum(
+        linking_reach(adt, params),
+        linking_reach(ends.first_seen[b] - ends.last_seen[aa], params),
+    )
     plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
     # Two fragments without a velocity link only across one frame period: chains
     # of single sparse returns (far structure, noise) would otherwise form. And
@@ -226,15 +270,33 @@ def link_fragments(
     )
     if np.count_nonzero(eligible) < 2:
         return labels, k
-    ((t_first, t_last),) = group_bounds(cid, k, ts)
     win = float(params.link_fit_window)
+    # A lone return at either end that the rest of the fragment did not head for (another
+    # object's, joined by the clusterer) does not define that end (deviation 65).
+    ((first_seen, last_seen),) = group_bounds(cid, k, ts)
+    kept = ~_stray_ends(cid, ts, ps, w, k, params)
+    cid, ts, ps, w = cid[kept], ts[kept], ps[kept], w[kept]
+    ((t_first, t_last),) = group_bounds(cid, k, ts)
     tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, ts >= t_last[cid] - win, k)
     tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, ts <= t_first[cid] + win, k)
     end_pos = pm_e + v_e * (t_last - tm_e)[:, None]
     start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
     speed_e = np.linalg.norm(v_e, axis=1)
     speed_s = np.linalg.norm(v_s, axis=1)
-    ends = _Ends(t_first, t_last, start_pos, end_pos, v_s, v_e, has_s, has_e, speed_s, speed_e)
+    ends = _Ends(
+        t_first,
+        t_last,
+        start_pos,
+        end_pos,
+        v_s,
+        v_e,
+        has_s,
+        has_e,
+        speed_s,
+        speed_e,
+        first_seen,
+        last_seen,
+    )
     idx = np.nonzero(eligible)[0]
     if active is None:
         row_sets = [(idx, idx)]

@@ -389,3 +389,60 @@ def test_later_rounds_over_new_chains_only_link_as_rounds_over_every_pair():
     # Same partition of the points (label numbers may differ).
     pairs = np.unique(np.stack([every, new_only]), axis=1)
     assert k_new == k_every and pairs.shape[1] == k_every + (every < 0).any()
+
+
+def _with_lone_return(offset) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An object at 8 m/s, 20 m up: a sparse piece (one return every 0.3 s, 0-1.5 s), a
+    dense one (four returns a frame, 1.9-2.9 s), and one more return in the sparse
+    piece's cluster at 1.8 s, ``offset`` m from the object's path."""
+    rng = np.random.default_rng(3)
+    sparse = np.arange(0.0, 1.6, 0.3)
+    dense = np.repeat(np.arange(1.9, 3.0, 0.1), 4)
+    t = np.concatenate([sparse, dense, [1.8]])
+    xyz = np.column_stack([8.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])
+    xyz += rng.normal(0.0, 0.1, xyz.shape)
+    xyz[-1] += np.asarray(offset, float)
+    lab = np.concatenate([np.zeros(sparse.size), np.ones(dense.size), [0]]).astype(np.int64)
+    return xyz, t, lab
+
+
+def test_a_lone_return_off_the_path_at_a_fragments_end_does_not_stop_the_link():
+    # Another object's return the clusterer joined to the end of the sparse piece, 4 m
+    # off its path: the piece's end state followed it, and the dense piece did not link
+    # (flyover seeds 1503, 1901, 1904: the drone's approach was left unreported).
+    params = detector_params()
+    xyz, t, lab = _with_lone_return((0.0, 4.0, 0.0))
+    assert link_fragments(lab, xyz, t, params)[1] == 1
+    # The same return on the path is the piece's end, and the pieces link as well.
+    xyz, t, lab = _with_lone_return((0.0, 0.2, 0.0))
+    assert link_fragments(lab, xyz, t, params)[1] == 1
+
+
+def test_fragments_of_one_or_two_samples_have_no_stray_ends():
+    # The last cluster a single return (its neighbouring sample indices past the end).
+    xyz, t, lab = _with_lone_return((0.0, 4.0, 0.0))
+    xyz = np.vstack([xyz, [[50.0, 50.0, 20.0]]])
+    t, lab = np.append(t, 1.0), np.append(lab, 2)
+    out, k = link_fragments(lab, xyz, t, detector_params())
+    assert k == 2 and np.count_nonzero(out == out[-1]) == 1
+
+
+def test_leaving_out_a_stray_end_does_not_widen_the_reach():
+    # Simulated fast_pass seed 1604 (t, x, y, z): three returns of a crown 50 m away, the
+    # last off the line of the first two, then the drone's first returns 1.3 s later.
+    # Without its last return the crown's piece ends 1.7 s before the drone's starts;
+    # the reach for 1.7 s joined them, the reach for the 1.3 s between the returns
+    # does not.
+    rows = np.array(
+        [
+            [2.991, -47.57, 21.31, 7.55],
+            [3.109, -48.03, 21.0, 5.03],
+            [3.545, -49.51, 19.62, 2.14],
+            [4.805, -33.42, 14.24, 7.35],
+            [4.964, -31.83, 13.78, 7.1],
+            [5.24, -29.32, 12.63, 6.71],
+            [5.95, -23.16, 10.63, 5.88],
+        ]
+    )
+    lab = np.array([0, 0, 0, 1, 1, 1, 1])
+    assert link_fragments(lab, rows[:, 1:], rows[:, 0], detector_params())[1] == 2
