@@ -258,62 +258,60 @@ def test_narrower_clusters_are_split_only_when_they_fail_as_a_whole():
     assert merged_clusters(scores, params, min_extent=0.3).tolist() == [0, 2, 3]
 
 
-def test_a_bird_linked_into_the_drone_track_for_a_moment_is_split_off():
-    # A sparse drone (one return a frame) and a bird crossing 7 m below it for 1.5 s
-    # with ten returns a frame, joined into one cluster (as linking can join them): in
-    # its local windows the cluster is only 1.5-2 m wide, but not confident.
+def _drone_with_bird_below(duration: float, below: float):
+    """(xyz, t, is_drone): a sparse drone (one return a frame, 8 s) and a bird crossing
+    ``below`` m under it from 4 s for ``duration`` s with ten returns a frame, joined
+    into one cluster (as linking can join them)."""
     rng = np.random.default_rng(0)
     stamps = np.arange(0.0, 8.0, 0.1)
-    crossing = stamps[(stamps >= 4.0) & (stamps < 5.5)]
+    crossing = stamps[(stamps >= 4.0) & (stamps < 4.0 + duration)]
     bird = _drone(np.full_like(crossing, 4.0)) + np.column_stack(
-        [np.zeros_like(crossing), 12.0 * (crossing - 4.75), np.full_like(crossing, -7.0)]
+        [
+            np.zeros_like(crossing),
+            12.0 * (crossing - 4.0 - duration / 2),
+            np.full_like(crossing, -below),
+        ]
     )
     xyz = np.vstack([_drone(stamps), np.repeat(bird, 10, axis=0)])
     xyz += rng.normal(0.0, 0.1, xyz.shape)
     t = np.concatenate([stamps, np.repeat(crossing, 10)])
-    drone = np.arange(t.size) < stamps.size
-    labels = np.zeros(t.size, np.int64)
-    params = detector_params()
-    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
-    assert params.split_min_extent < scores.local_extent[0] < 2.0
-    assert scores.confidence[0] < params.min_confidence
+    return xyz, t, np.arange(t.size) < stamps.size
 
+
+def _split_whole_cluster(xyz, t, drone, params, min_share: float = 1.0):
+    """Scores of the points as one cluster; asserts that :func:`split_merged` takes the
+    drone's returns (at least ``min_share`` of them) into a confident track of their own."""
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    assert scores.confidence[0] < params.min_confidence
     out, k, was_split = split_merged(labels, xyz, t, scores, params)
     assert k > 1 and was_split.all()
     after = score_clusters(out, xyz, t, params, n_clusters=k)
     mine = np.bincount(out[drone]).argmax()
-    assert np.mean(out[drone] == mine) > 0.95 and not np.any(out[~drone] == mine)
-    assert after.confidence[mine] >= params.min_confidence
+    assert np.mean(out[drone] == mine) >= min_share and not np.any(out[~drone] == mine)
+    assert after.candidate[mine] and after.confidence[mine] >= params.min_confidence
+    return labels, scores
+
+
+def test_a_bird_linked_into_the_drone_track_for_a_moment_is_split_off():
+    # The bird 7 m below for 1.5 s: in its local windows the cluster is only 1.5-2 m
+    # wide, but not confident.
+    xyz, t, drone = _drone_with_bird_below(1.5, 7.0)
+    params = detector_params()
+    labels, scores = _split_whole_cluster(xyz, t, drone, params, min_share=0.95)
+    assert params.split_min_extent < scores.local_extent[0] < 2.0
     # The 2 m threshold of deviation 36 left such a cluster whole.
     assert split_merged(labels, xyz, t, scores, params.copy(split_min_extent=2.0))[1] == 1
 
 
 def test_a_bird_beside_the_drone_for_a_second_is_split_off():
-    # As above, with the bird 6 m below the drone for 1 s: the joined cluster is only
-    # 1.1 m wide in its local windows (birds seed 1703, 0% offline, and default seed
-    # 1502, 71.9%, had drone clusters 1.08 and 1.11 m wide left whole by 1.2 m).
-    rng = np.random.default_rng(0)
-    stamps = np.arange(0.0, 8.0, 0.1)
-    crossing = stamps[(stamps >= 4.0) & (stamps < 5.0)]
-    bird = _drone(np.full_like(crossing, 4.0)) + np.column_stack(
-        [np.zeros_like(crossing), 12.0 * (crossing - 4.5), np.full_like(crossing, -6.0)]
-    )
-    xyz = np.vstack([_drone(stamps), np.repeat(bird, 10, axis=0)])
-    xyz += rng.normal(0.0, 0.1, xyz.shape)
-    t = np.concatenate([stamps, np.repeat(crossing, 10)])
-    drone = np.arange(t.size) < stamps.size
-    labels = np.zeros(t.size, np.int64)
+    # The bird 6 m below for 1 s: the joined cluster is only 1.1 m wide in its local
+    # windows (birds seed 1703, 0% offline, and default seed 1502, 71.9%, had drone
+    # clusters 1.08 and 1.11 m wide left whole by 1.2 m).
+    xyz, t, drone = _drone_with_bird_below(1.0, 6.0)
     params = detector_params()
-    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    labels, scores = _split_whole_cluster(xyz, t, drone, params)
     assert params.split_min_extent < scores.local_extent[0] < 1.2
-    assert scores.confidence[0] < params.min_confidence
-
-    out, k, was_split = split_merged(labels, xyz, t, scores, params)
-    assert k > 1 and was_split.all()
-    after = score_clusters(out, xyz, t, params, n_clusters=k)
-    mine = np.bincount(out[drone]).argmax()
-    assert np.all(out[drone] == mine) and not np.any(out[~drone] == mine)
-    assert after.confidence[mine] >= params.min_confidence
     # 1.2 m (deviation 53) left it whole.
     assert split_merged(labels, xyz, t, scores, params.copy(split_min_extent=1.2))[1] == 1
 
@@ -406,16 +404,7 @@ def test_a_bird_passing_a_hovering_drone_is_split_off():
     # Its few returns widen the cluster's local windows to 0.6-0.9 m only: left whole
     # by 1.0 m, the drone was never reported for those 6 s (deviation 64).
     t, xyz = _HOVER_AND_BIRD[:, 0], _HOVER_AND_BIRD[:, 1:]
-    drone = _HOVER_AND_BIRD_DRONE
-    labels = np.zeros(t.size, np.int64)
     params = detector_params()
-    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    labels, scores = _split_whole_cluster(xyz, t, _HOVER_AND_BIRD_DRONE, params)
     assert params.split_min_extent < scores.local_extent[0] < 1.0
-    assert scores.confidence[0] < params.min_confidence
-    out, k, was_split = split_merged(labels, xyz, t, scores, params)
-    assert k > 1 and was_split.all()
-    after = score_clusters(out, xyz, t, params, n_clusters=k)
-    mine = np.bincount(out[drone]).argmax()
-    assert np.all(out[drone] == mine) and not np.any(out[~drone] == mine)
-    assert after.candidate[mine] and after.confidence[mine] >= params.min_confidence
     assert split_merged(labels, xyz, t, scores, params.copy(split_min_extent=1.0))[1] == 1
