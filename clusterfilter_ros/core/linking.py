@@ -142,13 +142,13 @@ def _stray_ends(
     where the cluster's next ``link_fit_window`` of samples inward was heading (line fit
     with a velocity, over at least two other samples)."""
     stray = np.zeros(ts.size, dtype=bool)
+    if ts.size == 0:
+        return stray
     n = np.bincount(cid, minlength=k)
     first = np.concatenate([[0], np.cumsum(n)[:-1]])
     last = first + n - 1
     win = float(params.link_fit_window)
     idx = np.arange(ts.size)
-    if ts.size == 0:
-        return stray
     for edge, inner, sign in ((last, last - 1, 1.0), (first, first + 1, -1.0)):
         # Indices clipped for clusters with fewer than three samples, which are not judged.
         edge, inner = np.clip(edge, 0, ts.size - 1), np.clip(inner, 0, ts.size - 1)
@@ -189,6 +189,7 @@ def _linkable(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The candidate pairs (a, b) that may link, and their costs."""
     t_first, t_last, start_pos, end_pos, v_s, v_e, has_s, has_e, speed_s, speed_e = ends[:10]
+    first_seen, last_seen = ends.first_seen, ends.last_seen  # with stray ends kept
     fp = float(params.frame_period)
     gap = float(params.link_max_gap)
     dt = t_first[b] - t_last[aa]
@@ -200,7 +201,7 @@ def _linkable(
     # three returns otherwise joined the drone's track 1.7 s later).
     reach = np.minimum(
         linking_reach(adt, params),
-        linking_reach(ends.first_seen[b] - ends.last_seen[aa], params),
+        linking_reach(first_seen[b] - last_seen[aa], params),
     )
     plain = np.linalg.norm(start_pos[b] - end_pos[aa], axis=-1)
     # Two fragments without a velocity link only across one frame period: chains
