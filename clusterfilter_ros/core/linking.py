@@ -275,9 +275,11 @@ def link_fragments(
     # A lone return at either end that the rest of the fragment did not head for (another
     # object's, joined by the clusterer) does not define that end (deviation 65).
     ((first_seen, last_seen),) = group_bounds(cid, k, ts)
-    kept = ~_stray_ends(cid, ts, ps, w, k, params)
-    cid, ts, ps, w = cid[kept], ts[kept], ps[kept], w[kept]
-    ((t_first, t_last),) = group_bounds(cid, k, ts)
+    t_first, t_last = first_seen, last_seen
+    stray = _stray_ends(cid, ts, ps, w, k, params)
+    if stray.any():
+        cid, ts, ps, w = cid[~stray], ts[~stray], ps[~stray], w[~stray]
+        ((t_first, t_last),) = group_bounds(cid, k, ts)
     tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, ts >= t_last[cid] - win, k)
     tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, ts <= t_first[cid] + win, k)
     end_pos = pm_e + v_e * (t_last - tm_e)[:, None]

@@ -413,7 +413,7 @@ def score_clusters(
         # The part of the residual not explained by the object's own spread in one frame
         # (body size, range noise, motion within the frame): a sparse bird's few points
         # per frame are tight but wander from any smooth path between frames.
-        spread = frame_spread(lab, pts, frame_bin, k)
+        spread = frame_spread(lab, pts, frame_bin, k, frames)
         res.excess_residual = np.sqrt(np.maximum(res.residual**2 - spread**2, 0.0))
         r_lo = float(params.smooth_residual)
         r_hi = max(float(params.max_residual), r_lo + 1e-6)
@@ -531,14 +531,17 @@ def frames_near(
     owner = owner[near]
     stamp = (np.bincount(inv, weights=t) / n)[near]
     count = np.bincount(owner, minlength=k)
-    first = np.full(k, np.inf)
-    last = np.full(k, -np.inf)
-    np.minimum.at(first, owner, stamp)
-    np.maximum.at(last, owner, stamp)
+    ((first, last),) = group_bounds(owner, k, stamp)
     return count, np.where(count > 0, last - first, 0.0)
 
 
-def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int) -> np.ndarray:
+def frame_spread(
+    lab: np.ndarray,
+    pts: np.ndarray,
+    frame_bin: np.ndarray,
+    k: int,
+    frames: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Per cluster: RMS distance (m) of points to the mean of their frame bin, over all
     of the cluster's points.
 
@@ -546,10 +549,12 @@ def frame_spread(lab: np.ndarray, pts: np.ndarray, frame_bin: np.ndarray, k: int
     cannot be seen, so none of its distance from a fitted path is put down to it. (Averaged
     over the points of frames with at least 2 points only, as before deviation 61, the
     sparse returns of a far wall, most alone in their frame and a few pairs metres apart,
-    had a "spread" as large as their residual.) 0 for clusters with no such pair."""
+    had a "spread" as large as their residual.) 0 for clusters with no such pair.
+    ``frames``: :func:`bin_means` of ``lab``, ``frame_bin`` and ``pts`` when the caller
+    has it already."""
     if lab.size == 0:
         return np.zeros(k)
-    _, inv, _, c = bin_means(lab, frame_bin, pts)
+    _, inv, _, c = bin_means(lab, frame_bin, pts) if frames is None else frames
     d2 = np.einsum("na,na->n", pts - c[inv], pts - c[inv])
     cnt = np.bincount(lab, minlength=k)
     return np.sqrt(np.bincount(lab, weights=d2, minlength=k) / np.maximum(cnt, 1))
