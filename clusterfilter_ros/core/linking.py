@@ -366,18 +366,29 @@ def link_fragments(
 def _end_state(
     t: np.ndarray, xyz: np.ndarray, params: ParamSet, forward: bool
 ) -> tuple[float, np.ndarray, np.ndarray | None]:
-    """(time, position, velocity or None) at the last (``forward``) or first point."""
-    fp = float(params.frame_period)
+    """(time, position, velocity or None) at the last (``forward``) or first point.
+
+    The line is fitted over the frame samples within ``link_fit_window`` of that point.
+    When that is the point's own sample alone and it lies at or above
+    ``min_centroid_z``, over it and the next sample inward if that lies within
+    ``link_max_gap``: a sparse track's end in the sky still has a velocity. (Near the
+    ground, where a landing drone's track may have taken a person's returns, it has
+    none.)"""
+    edge = float(t.max() if forward else t.min())
+
+    def samples(span: float) -> tuple[np.ndarray, ...]:
+        sel = np.abs(t - edge) <= span
+        zeros = np.zeros(int(np.count_nonzero(sel)), dtype=np.int64)
+        return _frame_samples(zeros, xyz[sel], t[sel], 1, float(params.frame_period))
+
     win = float(params.link_fit_window)
-    if forward:
-        edge = float(t.max())
-        sel = t >= edge - win
-    else:
-        edge = float(t.min())
-        sel = t <= edge + win
-    zeros = np.zeros(int(np.count_nonzero(sel)), dtype=np.int64)
-    cid, ts, ps, w, _ = _frame_samples(zeros, xyz[sel], t[sel], 1, fp)
-    tm, pm, vel, has_v = _line_fits(cid, ts, ps, w, np.ones(ts.size, bool), 1)
+    cid, ts, ps, w, _ = samples(win)
+    use = np.ones(ts.size, dtype=bool)
+    if ts.size == 1 and ps[0, 2] >= params.min_centroid_z and params.link_max_gap > win:
+        cid, ts, ps, w, _ = samples(float(params.link_max_gap))
+        use = np.zeros(ts.size, dtype=bool)
+        use[np.argsort(np.abs(ts - edge), kind="stable")[:2]] = True
+    tm, pm, vel, has_v = _line_fits(cid, ts, ps, w, use, 1)
     pos = pm[0] + vel[0] * (edge - tm[0])
     return edge, pos, (vel[0] if has_v[0] else None)
 
@@ -393,7 +404,9 @@ def extend_track(
     (:func:`link_fragments`) join it and the end state is refitted; the same backwards
     from its start. The next frame may be up to ``extend_max_gap`` (at most
     ``link_max_gap``) beyond the end: a fast pass far away leaves returns 1-1.5 s apart.
-    Returns the new member mask.
+    An end sample with no other within ``link_fit_window`` takes its velocity from the
+    next sample inward (:func:`_end_state`; not near the ground). Returns the new member
+    mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member

@@ -446,3 +446,33 @@ def test_leaving_out_a_stray_end_does_not_widen_the_reach():
     )
     lab = np.array([0, 0, 0, 1, 1, 1, 1])
     assert link_fragments(lab, rows[:, 1:], rows[:, 0], detector_params())[1] == 2
+
+
+def _sparse_pass(z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A drone passing at 10 m/s whose selected track starts with a lone return 1.1 s
+    before the rest (as in fast_pass seed 3); two earlier returns on its path and one
+    5 m off it are left as noise. Returns xyz, t and the track's member mask."""
+    vel = np.array([10.0, -3.0, -1.0])
+    start = np.array([-40.0, 17.0, z])
+    track_t = np.concatenate([[3.9], np.arange(5.0, 8.0, 0.3)])
+    noise_t = np.array([3.1, 2.7, 3.1])
+    t = np.concatenate([track_t, noise_t])
+    xyz = start + (t - 3.9)[:, None] * vel
+    xyz[-1] += [0.0, 5.0, 0.0]
+    member = np.arange(t.size) < track_t.size
+    return xyz, t, member
+
+
+def test_extend_track_lone_first_return_takes_its_velocity_from_the_next_sample():
+    xyz, t, member = _sparse_pass(z=9.0)
+    grown = extend_track(member, xyz, t, ~member, detector_params())
+    assert grown[-3] and grown[-2]  # on the path, 0.8 s and 1.2 s before the lone return
+    assert not grown[-1]  # 5 m off it
+
+
+def test_extend_track_lone_return_near_the_ground_borrows_no_velocity():
+    # Below min_centroid_z (a landing drone's track may have taken a person's returns
+    # there) a lone end sample keeps to the old rule: no velocity, one frame of reach.
+    xyz, t, member = _sparse_pass(z=0.5)
+    grown = extend_track(member, xyz, t, ~member, detector_params())
+    assert np.array_equal(grown, member)
