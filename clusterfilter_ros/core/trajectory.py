@@ -10,6 +10,9 @@ With ``context_gap`` set (offline: ``link_max_gap``, as all samples belong to on
 linked track), a short segment's line is fitted through its neighbours' nearest
 ``context_window`` seconds as well, when they are at most ``context_gap`` away: one or
 two returns after a gap then move on with the track's velocity instead of standing still.
+That line judges strays (:func:`fit_trajectory`); the line returned keeps its velocity
+but passes through the segment's own samples, so a lone return on a curving path is not
+replaced by the chord between its neighbours.
 Positions are defined only inside a segment's span widened by ``max_extrapolation``
 seconds at each end (linear continuation there); elsewhere the answer is NaN.
 """
@@ -17,7 +20,7 @@ seconds at each end (linear continuation there); elsewhere the answer is NaN.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import make_smoothing_spline
@@ -74,6 +77,16 @@ class _Segment:
     model: object
     confidence: float
     n_samples: int
+    # A context line's own samples: (weighted mean position, weighted mean time).
+    own: tuple[np.ndarray, float] | None = None
+
+    def anchored(self) -> _Segment:
+        """A context line moved to pass through its own samples' mean, keeping the
+        velocity of its context; any other segment unchanged."""
+        if self.own is None:
+            return self
+        slope = self.model[0]
+        return replace(self, model=(slope, *self.own), own=None)
 
     def value(self, t: np.ndarray) -> np.ndarray:
         if self.kind == "constant":
@@ -170,7 +183,8 @@ def fit_trajectory(
     ``context_window`` (s): a segment of fewer than five samples is a straight line
     through its own samples and those of the neighbouring segments' nearest
     ``context_window`` seconds, for neighbours at most ``context_gap`` away (see the
-    module docstring); its span stays its own.
+    module docstring); its span stays its own. Strays are judged against that line; the
+    returned line has its velocity and goes through the segment's own mean position.
 
     ``stray_distance`` (m, 0 = off): points farther than this from the fitted track
     (another object's returns the clusterer joined to the drone's) are left out and the
@@ -198,16 +212,20 @@ def fit_trajectory(
         reach = (stray_distance, stray_speed, stray_accel, stray_window)
     fit_args = (max_gap, max_extrapolation, bin_seconds, context_gap, context_window, reach)
     traj = _fit(t, xyz, conf_pts, *fit_args)
-    if stray_distance <= 0:
-        return traj
-    kept = np.ones(t.size, dtype=bool)
-    for _ in range(STRAY_REFITS):
-        off = np.linalg.norm(traj(t) - xyz, axis=1)
-        keep = ~(off > stray_distance)  # NaN (no estimate there): kept
-        if np.array_equal(keep, kept) or keep.sum() * 2 < t.size:
-            break
-        kept = keep
-        traj = _fit(t[kept], xyz[kept], conf_pts[kept], *fit_args)
+    if stray_distance > 0:
+        kept = np.ones(t.size, dtype=bool)
+        for _ in range(STRAY_REFITS):
+            off = np.linalg.norm(traj(t) - xyz, axis=1)
+            keep = ~(off > stray_distance)  # NaN (no estimate there): kept
+            if np.array_equal(keep, kept) or keep.sum() * 2 < t.size:
+                break
+            kept = keep
+            traj = _fit(t[kept], xyz[kept], conf_pts[kept], *fit_args)
+    # Strays are judged against the context lines as fitted (a lone return off its
+    # neighbours' line is left out); what is kept is then estimated through its own
+    # position: on a curving pass the line through the neighbours' denser windows misses
+    # a lone drone return between them by a metre or more.
+    traj.segments = [seg.anchored() for seg in traj.segments]
     return traj
 
 
@@ -254,7 +272,8 @@ def _fit(
             if extra:
                 ctx = np.concatenate([idx, *extra])
                 model = weighted_line(ts[ctx], ps[ctx], ws[ctx])
-                segments.append(_Segment(st[0], st[-1], "line", model, conf, st.size))
+                own = (np.average(sp, axis=0, weights=sw), float(np.average(st, weights=sw)))
+                segments.append(_Segment(st[0], st[-1], "line", model, conf, st.size, own))
                 continue
         if st.size >= 5 and st[-1] - st[0] > 0:
             splines = []

@@ -105,6 +105,21 @@ def test_a_short_piece_after_a_gap_moves_with_its_neighbours_velocity():
     assert far.segments[-1].kind == "constant"
 
 
+def test_a_lone_return_between_two_pieces_keeps_its_own_position():
+    # A pass slowing at 2 m/s^2 (x = 10 t - t^2; fast_pass seed 1800 curves 50 m out):
+    # dense pieces before 1.0 s and after 3.4 s, one return at 2.1 s between them (gaps
+    # over max_gap on both sides). A line through the neighbours' windows misses that
+    # return by almost 3 m (the chord); the piece's line goes through it with their
+    # velocity.
+    t = np.concatenate([np.arange(0.0, 1.0, 0.1), [2.1], np.arange(3.4, 4.4, 0.1)])
+    xyz = np.column_stack([10.0 * t - t * t, np.zeros_like(t), np.full_like(t, 20.0)])
+    traj = fit_trajectory(t, xyz, max_gap=1.0, max_extrapolation=0.3, context_gap=2.0)
+    assert [s.kind for s in traj.segments] == ["spline", "line", "spline"]
+    at = traj(np.array([1.9, 2.1, 2.3]))
+    truth = 10.0 * np.array([1.9, 2.1, 2.3]) - np.array([1.9, 2.1, 2.3]) ** 2
+    assert np.abs(at[:, 0] - truth).max() < 0.15
+
+
 def test_weighted_line_recovers_a_line_and_handles_one_instant():
     t = np.array([0.0, 1.0, 2.0])
     xyz = np.array([[0.0, 1, 2], [2, 1, 2], [4, 1, 2]])
