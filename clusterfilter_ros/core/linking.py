@@ -419,10 +419,13 @@ def extend_track(
     pool_idx = np.nonzero(pool)[0]
     pool_idx = pool_idx[np.argsort(t[pool_idx], kind="stable")]
     pool_t = t[pool_idx]
+    # A lone stray return at either end of the track (another object's, joined by the
+    # clusterer) stays a member but does not define where the track was heading.
+    inner = member & ~_stray_end_points(member, xyz, t, params)
     for forward in (True, False):
         taken = np.zeros(pool_idx.size, dtype=bool)
         while True:
-            m = np.nonzero(member)[0]
+            m = np.nonzero(inner)[0]
             edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
             if forward:
                 lo = np.searchsorted(pool_t, edge, side="right")
@@ -450,7 +453,23 @@ def extend_track(
             join = cand[ok & (adt <= near_t + fp / 2)]
             taken[join] = True
             member[pool_idx[join]] = True
+            inner[pool_idx[join]] = True
     return member
+
+
+def _stray_end_points(
+    member: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+) -> np.ndarray:
+    """(N,) bool: the member points of the track's first or last frame sample when that
+    is a stray end (:func:`_stray_ends`)."""
+    m = np.nonzero(member)[0]
+    ids = frame_sample_ids(np.zeros(m.size, np.int64), t[m], float(params.frame_period))
+    cid, ts, ps, w, _ = _frame_samples(
+        np.zeros(m.size, np.int64), xyz[m], t[m], 1, float(params.frame_period)
+    )
+    stray = np.zeros(member.size, dtype=bool)
+    stray[m] = _stray_ends(cid, ts, ps, w, 1, params)[ids]
+    return stray
 
 
 def fill_track(

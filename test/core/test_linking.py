@@ -476,3 +476,21 @@ def test_extend_track_lone_return_near_the_ground_borrows_no_velocity():
     xyz, t, member = _sparse_pass(z=0.5)
     grown = extend_track(member, xyz, t, ~member, detector_params())
     assert np.array_equal(grown, member)
+
+
+def test_extend_track_ignores_a_stray_last_return_of_the_track():
+    # A sparse track (one return every 0.3 s at 8 m/s, as fast_pass seed 1903 40 m out)
+    # whose last member is a return of something else 8 m behind it, joined by the
+    # clusterer. The drone's next returns, 0.6 s and 1.1 s after its own last one, lie
+    # where the track was heading and are grown into; the stray stays a member.
+    track_t = np.arange(0.0, 1.6, 0.3)
+    track = np.column_stack([8.0 * track_t, np.zeros_like(track_t), np.full_like(track_t, 20.0)])
+    stray = [[7.2, 2.0, 20.0]]
+    ahead_t = np.array([2.1, 2.6])
+    ahead = np.column_stack([8.0 * ahead_t, np.zeros(2), np.full(2, 20.0)])
+    xyz = np.concatenate([track, stray, ahead])
+    t = np.concatenate([track_t, [1.8], ahead_t])
+    member = np.arange(t.size) < track_t.size + 1
+    grown = extend_track(member, xyz, t, ~member, detector_params())
+    assert grown[-2] and grown[-1]
+    assert grown[track_t.size]
