@@ -8,7 +8,9 @@ was heading:
 
 - each cluster's *end state* (position and velocity at its last stamp) and *start state*
   come from a weighted straight-line fit over its first / last ``link_fit_window``
-  seconds of per-frame mean positions; a fragment spanning less than two frames has no
+  seconds of per-frame mean positions, reaching further inward (within
+  ``link_max_gap``) to a sample at least three frame periods from the end when none
+  there is (:func:`_end_windows`); a fragment spanning less than two frames has no
   velocity, only a position;
 - a pair (A, B) is a candidate when the gap ``dt = t_first(B) - t_last(A)`` is between
   ``-frame_period`` and ``link_max_gap`` and the distance between B's start and A's
@@ -45,6 +47,9 @@ from clusterfilter_ros.core.params import ParamSet
 #: many (cluster, candidate) cells, which bounds the memory whatever the scene.
 _BLOCK = 512
 _BLOCK_CELLS = 1 << 18
+#: An end state's line needs samples at least this many frame periods apart: over 0.1 s
+#: a drone's 0.3-0.5 m spread of returns is a velocity error of several m/s.
+MIN_BASELINE_FRAMES = 3
 
 
 def linking_reach(gap: np.ndarray, params: ParamSet, gate: float | None = None) -> np.ndarray:
@@ -132,6 +137,39 @@ def _line_fits(
     has_v = (n_samples >= 2) & (t_hi - t_lo > 0) & (stt > 0)
     vel = np.where(has_v[:, None], stp / np.maximum(stt, 1e-12)[:, None], 0.0)
     return tm, pm, vel, has_v
+
+
+def _end_windows(
+    cid: np.ndarray,
+    ts: np.ndarray,
+    t_first: np.ndarray,
+    t_last: np.ndarray,
+    k: int,
+    params: ParamSet,
+    widen: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(S,) bool each over the frame samples: those a cluster's end state and start state
+    are fitted over. Normally its last / first ``link_fit_window`` seconds of samples.
+    Where no sample there lies at least :data:`MIN_BASELINE_FRAMES` frame periods from
+    the end (two frames 0.1 s apart: a velocity that is mostly noise; or the end sample
+    alone: none), the window reaches inward to the nearest such sample, if it is within
+    ``link_max_gap`` of the end. ``widen`` (K,) bool: the clusters allowed that (default
+    all)."""
+    win = float(params.link_fit_window)
+    base = MIN_BASELINE_FRAMES * float(params.frame_period)
+    gap = float(params.link_max_gap)
+    allowed = np.ones(k, dtype=bool) if widen is None else np.asarray(widen, dtype=bool)
+    far_e = ts <= t_last[cid] - base
+    far_s = ts >= t_first[cid] + base
+    ((_, ref_e),) = group_bounds(cid[far_e], k, ts[far_e])  # latest sample base before end
+    ((ref_s, _),) = group_bounds(cid[far_s], k, ts[far_s])  # earliest base after start
+    from_e = np.where(
+        allowed & (ref_e < t_last - win) & (ref_e >= t_last - gap), ref_e, t_last - win
+    )
+    to_s = np.where(
+        allowed & (ref_s > t_first + win) & (ref_s <= t_first + gap), ref_s, t_first + win
+    )
+    return ts >= from_e[cid], ts <= to_s[cid]
 
 
 def _stray_ends(
@@ -271,7 +309,6 @@ def link_fragments(
     )
     if np.count_nonzero(eligible) < 2:
         return labels, k
-    win = float(params.link_fit_window)
     # A lone return at either end that the rest of the fragment did not head for (another
     # object's, joined by the clusterer) does not define that end (deviation 65).
     ((first_seen, last_seen),) = group_bounds(cid, k, ts)
@@ -280,8 +317,9 @@ def link_fragments(
     if stray.any():
         cid, ts, ps, w = cid[~stray], ts[~stray], ps[~stray], w[~stray]
         ((t_first, t_last),) = group_bounds(cid, k, ts)
-    tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, ts >= t_last[cid] - win, k)
-    tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, ts <= t_first[cid] + win, k)
+    end_sel, start_sel = _end_windows(cid, ts, t_first, t_last, k, params)
+    tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, end_sel, k)
+    tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, start_sel, k)
     end_pos = pm_e + v_e * (t_last - tm_e)[:, None]
     start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
     speed_e = np.linalg.norm(v_e, axis=1)
@@ -368,27 +406,20 @@ def _end_state(
 ) -> tuple[float, np.ndarray, np.ndarray | None]:
     """(time, position, velocity or None) at the last (``forward``) or first point.
 
-    The line is fitted over the frame samples within ``link_fit_window`` of that point.
-    When that is the point's own sample alone and it lies at or above
-    ``min_centroid_z``, over it and the next sample inward if that lies within
-    ``link_max_gap``: a sparse track's end in the sky still has a velocity. (Near the
-    ground, where a landing drone's track may have taken a person's returns, it has
-    none.)"""
+    The line is fitted over the frame samples of :func:`_end_windows`: a sparse track's
+    end in the sky still has a velocity, from the next sample inward. Not when the end
+    sample lies below ``min_centroid_z``: near the ground, where a landing drone's track
+    may have taken a person's returns, only the samples within ``link_fit_window``."""
     edge = float(t.max() if forward else t.min())
-
-    def samples(span: float) -> tuple[np.ndarray, ...]:
-        sel = np.abs(t - edge) <= span
-        zeros = np.zeros(int(np.count_nonzero(sel)), dtype=np.int64)
-        return _frame_samples(zeros, xyz[sel], t[sel], 1, float(params.frame_period))
-
-    win = float(params.link_fit_window)
-    cid, ts, ps, w, _ = samples(win)
-    use = np.ones(ts.size, dtype=bool)
-    if ts.size == 1 and ps[0, 2] >= params.min_centroid_z and params.link_max_gap > win:
-        cid, ts, ps, w, _ = samples(float(params.link_max_gap))
-        use = np.zeros(ts.size, dtype=bool)
-        use[np.argsort(np.abs(ts - edge), kind="stable")[:2]] = True
-    tm, pm, vel, has_v = _line_fits(cid, ts, ps, w, use, 1)
+    span = max(float(params.link_fit_window), float(params.link_max_gap))
+    sel = np.abs(t - edge) <= span
+    zeros = np.zeros(int(np.count_nonzero(sel)), dtype=np.int64)
+    cid, ts, ps, w, _ = _frame_samples(zeros, xyz[sel], t[sel], 1, float(params.frame_period))
+    ((t_first, t_last),) = group_bounds(cid, 1, ts)
+    at_edge = int(np.argmax(ts) if forward else np.argmin(ts))
+    in_sky = np.array([ps[at_edge, 2] >= params.min_centroid_z])
+    end_sel, start_sel = _end_windows(cid, ts, t_first, t_last, 1, params, widen=in_sky)
+    tm, pm, vel, has_v = _line_fits(cid, ts, ps, w, end_sel if forward else start_sel, 1)
     pos = pm[0] + vel[0] * (edge - tm[0])
     return edge, pos, (vel[0] if has_v[0] else None)
 
@@ -404,9 +435,10 @@ def extend_track(
     (:func:`link_fragments`) join it and the end state is refitted; the same backwards
     from its start. The next frame may be up to ``extend_max_gap`` (at most
     ``link_max_gap``) beyond the end: a fast pass far away leaves returns 1-1.5 s apart.
-    An end sample with no other within ``link_fit_window`` takes its velocity from the
-    next sample inward (:func:`_end_state`; not near the ground). Returns the new member
-    mask.
+    An end whose samples within ``link_fit_window`` span less than three frame periods
+    (one sample alone, or two frames 0.1 s apart) takes its velocity over the nearest
+    sample further inward (:func:`_end_state`; not near the ground). Returns the new
+    member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member

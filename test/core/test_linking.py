@@ -494,3 +494,22 @@ def test_extend_track_ignores_a_stray_last_return_of_the_track():
     grown = extend_track(member, xyz, t, ~member, detector_params())
     assert grown[-2] and grown[-1]
     assert grown[track_t.size]
+
+
+def test_an_end_state_over_two_frames_0_1_s_apart_reaches_back_for_its_velocity():
+    # Flyover seed 1902, 110 m out: a track at 11.7 m/s whose last two frames, 0.09 s
+    # apart, are 0.35 m off its path in opposite directions (the drone's spread of
+    # returns). Fitted over those two alone its end velocity is 8 m/s off, and the
+    # drone's next frame, 1.35 s later and on the path, lay beyond the reach.
+    def on_path(times):
+        times = np.asarray(times, dtype=float)
+        return np.column_stack([np.zeros_like(times), 11.7 * times, np.full_like(times, 90.0)])
+
+    a_t = np.array([35.0, 35.4, 35.9, 37.04, 37.13])
+    a_xyz = on_path(a_t) + [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0.25, -0.25, 0], [-0.25, 0.25, 0]]
+    b_t = np.array([38.48])
+    t = np.concatenate([np.repeat(a_t, 3), np.repeat(b_t, 5)])
+    xyz = np.concatenate([np.repeat(a_xyz, 3, axis=0), np.repeat(on_path(b_t), 5, axis=0)])
+    lab = np.concatenate([np.zeros(15, np.int64), np.ones(5, np.int64)])
+    out, k = link_fragments(lab, xyz, t, detector_params())
+    assert k == 1
