@@ -425,7 +425,12 @@ def _end_state(
 
 
 def extend_track(
-    member: np.ndarray, xyz: np.ndarray, t: np.ndarray, pool: np.ndarray, params: ParamSet
+    member: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    pool: np.ndarray,
+    params: ParamSet,
+    short_gap: np.ndarray | None = None,
 ) -> np.ndarray:
     """Grow a selected track at both ends with points of ``pool`` where it was heading.
 
@@ -437,8 +442,9 @@ def extend_track(
     ``link_max_gap``) beyond the end: a fast pass far away leaves returns 1-1.5 s apart.
     An end whose samples within ``link_fit_window`` span less than three frame periods
     (one sample alone, or two frames 0.1 s apart) takes its velocity over the nearest
-    sample further inward (:func:`_end_state`; not near the ground). Returns the new
-    member mask.
+    sample further inward (:func:`_end_state`; not near the ground). ``short_gap`` (N,)
+    bool: pool points that join only within ``max_extrapolation`` of the end. Returns
+    the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
@@ -467,6 +473,9 @@ def extend_track(
                 hi = np.searchsorted(pool_t, edge, side="left")
             cand = np.arange(lo, hi)
             cand = cand[~taken[cand]]
+            if short_gap is not None:
+                far = np.abs(pool_t[cand] - edge) > params.max_extrapolation
+                cand = cand[~(far & short_gap[pool_idx[cand]])]
             if cand.size == 0:
                 break
             dt = pool_t[cand] - edge

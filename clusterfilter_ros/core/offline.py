@@ -401,12 +401,16 @@ def extend_selected(
     selected: list[int],
     params: ParamSet,
     exclude: np.ndarray | None = None,
+    near_floor: np.ndarray | None = None,
 ) -> np.ndarray:
     """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
     and filled inside (:func:`~.linking.fill_track`) by noise points and clusters too
     small to be scored (< ``min_cluster_points``), and inside also by the points of other
     scored clusters within ``track_gate`` of its path; never by the points in
-    ``exclude``."""
+    ``exclude``. The points in ``near_floor`` (the Mid360 returns below ``mid360_min_z``
+    of :func:`growth_only_points`) join a track's end only across gaps of at most
+    ``max_extrapolation``: a drone landing near the rig is seen every frame, and after
+    it has landed a person walking past must not continue its track."""
     # Only what is too small to be judged on its own: a cluster that was scored and
     # rejected (an erratic bird, say) must not extend a track.
     small = scores.n_points < params.min_cluster_points
@@ -420,7 +424,8 @@ def extend_selected(
         scored &= ~exclude
     out = labels.copy()
     for c in selected:
-        member = fill_track(extend_track(out == c, xyz, t, pool, params), xyz, t, pool, params)
+        grown = extend_track(out == c, xyz, t, pool, params, short_gap=near_floor)
+        member = fill_track(grown, xyz, t, pool, params)
         member = fill_track(member, xyz, t, scored, params, max_reach=params.track_gate)
         pool &= ~member
         scored &= ~member
@@ -437,9 +442,10 @@ def growth_only_points(
     t: np.ndarray,
     selected: list[int],
     params: ParamSet,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(xyz (M, 3) float32, t (M,)): points kept out of clustering and scoring that a
-    selected track may still grow into (:func:`extend_selected`).
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(xyz (M, 3) float32, t (M,), below the floor (M,) bool): points kept out of
+    clustering and scoring that a selected track may still grow into
+    (:func:`extend_selected`).
 
     - ``extend_denoised``: the points of ``cloud`` the denoise removed (``denoised``
       marks them), except those in the suppressed static voxels ``structure``. A drone
@@ -451,7 +457,8 @@ def growth_only_points(
       (:func:`~.background.persistent_mask`): the ground, walls and parked things stay
       out, a drone taking off or landing below the Mid360's height does not.
 
-    ``labels``, ``xyz`` and ``t`` are the clustered points (after the filters).
+    ``labels``, ``xyz`` and ``t`` are the clustered points (after the filters). Returns
+    also (M,) bool: which of the points are those below the floor.
     """
     parts_xyz, parts_t = [], []
     if params.extend_denoised and denoised.any():
@@ -475,7 +482,10 @@ def growth_only_points(
         transient = ~persistent_mask(fxyz, ft, params)
         parts_xyz.append(fxyz[transient])
         parts_t.append(ft[transient])
-    return _stack(parts_xyz, np.empty((0, 3), np.float32)), _stack(parts_t, np.empty(0))
+    n_denoised = parts_t[0].size if params.extend_denoised and denoised.any() else 0
+    gt = _stack(parts_t, np.empty(0))
+    floor = np.arange(gt.size) >= n_denoised
+    return _stack(parts_xyz, np.empty((0, 3), np.float32)), gt, floor
 
 
 def _track_ends(
@@ -546,13 +556,17 @@ def detect_offline(
         # growth (a bird's piece beside the drone's would).
         # Nor do the points trimmed off a selected cluster.
         exclude = trimmed if was_split is None else was_split | trimmed
+        near_floor = None
         if _grows(params):
-            gxyz, gt = growth_only_points(cloud, ~keep, structure, labels, xyz, t, selected, params)
+            gxyz, gt, gfloor = growth_only_points(
+                cloud, ~keep, structure, labels, xyz, t, selected, params
+            )
             if gt.size:
+                near_floor = np.concatenate([np.zeros(t.size, dtype=bool), gfloor])
                 xyz, t = np.concatenate([xyz, gxyz]), np.concatenate([t, gt])
                 labels = np.concatenate([labels, np.full(gt.size, -1, labels.dtype)])
                 exclude = np.concatenate([exclude, np.zeros(gt.size, dtype=bool)])
-        labels = extend_selected(labels, xyz, t, scores, selected, params, exclude)
+        labels = extend_selected(labels, xyz, t, scores, selected, params, exclude, near_floor)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(

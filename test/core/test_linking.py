@@ -513,3 +513,30 @@ def test_an_end_state_over_two_frames_0_1_s_apart_reaches_back_for_its_velocity(
     lab = np.concatenate([np.zeros(15, np.int64), np.ones(5, np.int64)])
     out, k = link_fragments(lab, xyz, t, detector_params())
     assert k == 1
+
+
+def test_extend_track_bridges_no_gap_into_returns_below_the_floor():
+    # Take-off seed 2201 of the twenty-first fresh set: a drone landing 7 m from the rig
+    # (one sample a frame, descending at 2.4 m/s), then, 1.37 s after its last return
+    # and 5 m away, a person walking past below the Mid360's height. Both are returns
+    # below the floor that growth may take; the person's must not continue the track.
+    land_t = np.arange(32.0, 33.45, 0.1)
+    land = np.column_stack(
+        [np.full_like(land_t, 6.0), -3.5 + 0.85 * (land_t - 33.0), 0.05 - 2.4 * (land_t - 33.0)]
+    )
+    touch_t = np.array([33.5])  # the drone's last return, 0.09 s after the track's end
+    touch = np.array([[6.0, -3.07, -1.0]])
+    walk_t = np.arange(34.78, 36.0, 0.1)
+    walk = np.column_stack(
+        [np.full_like(walk_t, 10.3), -0.64 - 1.8 * (walk_t - 34.78), np.full_like(walk_t, -0.8)]
+    )
+    xyz = np.concatenate([land, touch, walk])
+    t = np.concatenate([land_t, touch_t, walk_t])
+    member = np.arange(t.size) < land_t.size
+    below = ~member & (xyz[:, 2] <= 0.0)
+    params = detector_params()
+    grown = extend_track(member, xyz, t, ~member, params, short_gap=below)
+    assert grown[land_t.size]  # the drone's own last return, one frame on
+    assert not grown[land_t.size + 1 :].any()
+    # Without the limit the person's returns are within the reach (5.2 m after 1.37 s).
+    assert extend_track(member, xyz, t, ~member, params)[land_t.size + 1 :].any()
