@@ -542,7 +542,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "Offline: a selected track's growth may also take Mid360 returns at or below "
         "mid360_min_z in voxels hit in fewer than static_min_bins time bins (a drone "
         "taking off or landing; ground, walls and parked things are persistent and stay "
-        "out); false = the floor filter holds for growth too.",
+        "out), across gaps of at most max_extrapolation (a person walking past after "
+        "touchdown does not continue the track); false = the floor filter holds for "
+        "growth too.",
     ),
     ParamSpec(
         "split_merged",
