@@ -442,9 +442,12 @@ def extend_track(
     ``link_max_gap``) beyond the end: a fast pass far away leaves returns 1-1.5 s apart.
     An end whose samples within ``link_fit_window`` span less than three frame periods
     (one sample alone, or two frames 0.1 s apart) takes its velocity over the nearest
-    sample further inward (:func:`_end_state`; not near the ground). ``short_gap`` (N,)
-    bool: pool points that join only within ``max_extrapolation`` of the end. Returns
-    the new member mask.
+    sample further inward (:func:`_end_state`; not near the ground). A point within
+    ``link_gate`` of where the track would be had it braked along its way harder than
+    ``link_max_accel``, up to ``extend_max_brake`` (:func:`_braking_offsets`), joins it
+    too: a drone stopping into a hover (backwards in time: speeding away from one).
+    ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
+    the end. Returns the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
@@ -486,7 +489,10 @@ def extend_track(
             else:
                 pred = pos + dt[:, None] * vel
                 reach = linking_reach(adt, params)
-            ok = np.linalg.norm(xyz[pool_idx[cand]] - pred, axis=1) <= reach
+            pts = xyz[pool_idx[cand]]
+            ok = np.linalg.norm(pts - pred, axis=1) <= reach
+            if vel is not None:
+                ok |= _braking_offsets(pts, pos, vel, dt, params) <= params.link_gate
             if not ok.any():
                 break
             # The nearest frame in time among the reachable points joins the track.
@@ -496,6 +502,32 @@ def extend_track(
             member[pool_idx[join]] = True
             inner[pool_idx[join]] = True
     return member
+
+
+def _braking_offsets(
+    pts: np.ndarray, pos: np.ndarray, vel: np.ndarray, dt: np.ndarray, params: ParamSet
+) -> np.ndarray:
+    """(M,) distance (m) of each point from where the track would be ``dt`` seconds from
+    its end (``pos``, velocity ``vel``) had it braked along its way at a deceleration
+    between ``link_max_accel`` (whose reach covers the gentler ones) and
+    ``extend_max_brake``, coming to a stop at most; inf where ``extend_max_brake`` is
+    not above ``link_max_accel`` or the track is not moving."""
+    brake, gentle = float(params.extend_max_brake), float(params.link_max_accel)
+    speed = float(np.linalg.norm(vel))
+    if brake <= gentle or speed <= 0:
+        return np.full(len(pts), np.inf)
+    unit = vel / speed
+    adt = np.abs(dt)
+
+    def covered(a: float) -> np.ndarray:  # distance along the way after adt, braking at a
+        tau = np.minimum(adt, speed / a) if a > 0 else adt
+        return speed * tau - 0.5 * a * tau * tau
+
+    sign = np.sign(dt)
+    along = sign * ((pts - pos) @ unit)  # along the way, in the direction of growth
+    d = np.clip(along, covered(brake), covered(gentle))
+    nearest = pos + (sign * d)[:, None] * unit
+    return np.linalg.norm(pts - nearest, axis=1)
 
 
 def _stray_end_points(

@@ -528,6 +528,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "extend_max_brake",
+        "float",
+        8.0,
+        "Offline: hardest braking (m/s^2) along its velocity a selected track may have "
+        "done when it grows at its ends (a drone stopping into a hover beyond the reach of "
+        "link_max_accel): a return within link_gate of where the track would be, braked at "
+        "link_max_accel to this (to a stop at most), joins it too; at or below "
+        "link_max_accel nothing more than the linking reach.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "extend_denoised",
         "bool",
         True,

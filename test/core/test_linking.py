@@ -540,3 +540,54 @@ def test_extend_track_bridges_no_gap_into_returns_below_the_floor():
     assert not grown[land_t.size + 1 :].any()
     # Without the limit the person's returns are within the reach (5.2 m after 1.37 s).
     assert extend_track(member, xyz, t, ~member, params)[land_t.size + 1 :].any()
+
+
+def _braking_into_a_hover(first_return: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Take-off seed 2303 of the twenty-second fresh set: a track at 7.6 m/s along x whose
+    last return is at x = 26 m (9.95 s), and the returns of a hover 1.15-4.55 s later at
+    ``first_return`` (along x, across in y). The drone braked harder than link_max_accel:
+    the hover lies 5.1 m short of where the track was heading, beyond the reach of 4.1 m.
+    Returns (xyz, t) of the track (2 returns a frame) followed by the hover's 10."""
+    rng = np.random.default_rng(3)
+    track_t = np.repeat(np.arange(8.0, 9.96, 0.15), 2)
+    track = np.column_stack(
+        [26.0 + 7.6 * (track_t - 9.95), np.zeros_like(track_t), np.full_like(track_t, 14.0)]
+    )
+    hover_t = np.linspace(11.1, 14.5, 10)
+    x, y = first_return
+    hover = np.column_stack([np.full(10, 26.0 + x), np.full(10, y), np.full(10, 14.0)])
+    hover += rng.normal(0.0, 0.05, hover.shape)
+    return np.concatenate([track, hover]), np.concatenate([track_t, hover_t])
+
+
+def test_extend_track_follows_a_drone_braking_into_a_hover():
+    xyz, t = _braking_into_a_hover((3.67, 0.0))
+    member = t < 10.0
+    grown = extend_track(member, xyz, t, ~member, detector_params())
+    assert grown[~member].all()
+    # Braking no harder than link_max_accel, the hover is out of reach.
+    gentle = detector_params({"extend_max_brake": 4.0})
+    assert not extend_track(member, xyz, t, ~member, gentle)[~member].any()
+
+
+@pytest.mark.parametrize(
+    "first_return",
+    [(1.5, 0.0), (3.67, 2.5)],  # a stop needing 19 m/s^2; 2.5 m off the way
+    ids=["harder-than-extend_max_brake", "off-the-way"],
+)
+def test_extend_track_takes_no_stop_it_could_not_have_made(first_return):
+    xyz, t = _braking_into_a_hover(first_return)
+    member = t < 10.0
+    assert not extend_track(member, xyz, t, ~member, detector_params())[~member].any()
+
+
+def test_extend_track_reaches_back_to_the_hover_a_drone_sped_away_from():
+    # The same flight backwards in time: a hover, then a track leaving it at 7.6 m/s.
+    # Growing from the track's first return back in time is the mirror image.
+    xyz, t = _braking_into_a_hover((3.67, 0.0))
+    t = 20.0 - t
+    member = t > 10.0
+    grown = extend_track(member, xyz, t, ~member, detector_params())
+    assert grown[~member].all()
+    gentle = detector_params({"extend_max_brake": 4.0})
+    assert not extend_track(member, xyz, t, ~member, gentle)[~member].any()
