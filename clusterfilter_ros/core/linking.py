@@ -445,7 +445,9 @@ def extend_track(
     sample further inward (:func:`_end_state`; not near the ground). A point within
     ``link_gate`` of where the track would be had it braked along its way harder than
     ``link_max_accel``, up to ``extend_max_brake`` (:func:`_braking_offsets`), joins it
-    too: a drone stopping into a hover (backwards in time: speeding away from one).
+    too: a drone stopping into a hover (backwards in time: speeding away from one). An
+    end slower than ``min_speed`` (hovering) also takes, across gaps longer than that up
+    to ``extend_hover_gap``, the returns within ``track_gate`` of where it was heading.
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
     the end. Returns the new member mask.
     """
@@ -465,14 +467,20 @@ def extend_track(
     inner = member & ~_stray_end_points(member, xyz, t, params)
     for forward in (True, False):
         taken = np.zeros(pool_idx.size, dtype=bool)
+        slow = False
         while True:
             m = np.nonzero(inner)[0]
             edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
+            if vel is None and slow:
+                # A lone return taken across a hover's pause: still hovering there.
+                vel = np.zeros(3)
+            slow = vel is not None and float(np.linalg.norm(vel)) < params.min_speed
+            span = max(gap, float(params.extend_hover_gap)) if slow else gap
             if forward:
                 lo = np.searchsorted(pool_t, edge, side="right")
-                hi = np.searchsorted(pool_t, edge + gap, side="right")
+                hi = np.searchsorted(pool_t, edge + span, side="right")
             else:
-                lo = np.searchsorted(pool_t, edge - gap, side="left")
+                lo = np.searchsorted(pool_t, edge - span, side="left")
                 hi = np.searchsorted(pool_t, edge, side="left")
             cand = np.arange(lo, hi)
             cand = cand[~taken[cand]]
@@ -489,6 +497,8 @@ def extend_track(
             else:
                 pred = pos + dt[:, None] * vel
                 reach = linking_reach(adt, params)
+                if span > gap:  # a hovering end: beyond the usual gap, where it was
+                    reach = np.where(adt > gap, params.track_gate, reach)
             pts = xyz[pool_idx[cand]]
             ok = np.linalg.norm(pts - pred, axis=1) <= reach
             if vel is not None:

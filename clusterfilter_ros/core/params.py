@@ -528,6 +528,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "extend_hover_gap",
+        "float",
+        3.0,
+        "Offline: a selected track's end slower than min_speed (a hovering drone seen once "
+        "every second or two) grows across gaps up to this (s) by returns within "
+        "track_gate of where it was heading (as streaming re-acquires a slow track within "
+        "reacquire_window); at or below extend_max_gap, as any end.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "extend_max_brake",
         "float",
         8.0,

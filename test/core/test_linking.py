@@ -591,3 +591,37 @@ def test_extend_track_reaches_back_to_the_hover_a_drone_sped_away_from():
     assert grown[~member].all()
     gentle = detector_params({"extend_max_brake": 4.0})
     assert not extend_track(member, xyz, t, ~member, gentle)[~member].any()
+
+
+def _hover_with_a_pause(earlier: list[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """Take-off seed 2301 of the twenty-second fresh set: a drone hovering 35 m out, its
+    returns once or twice a second, with a pause of 2.35 s (12.92 -> 15.27 s) longer than
+    extend_max_gap. The track is the hover after the pause; ``earlier`` are (time, offset
+    along x in m) of returns before it. Returns (xyz, t), the track's first."""
+    rng = np.random.default_rng(4)
+    here = np.array([22.4, 22.2, 14.7])
+    track_t = np.array([15.27, 15.76, 16.33, 16.88, 17.4, 17.9])
+    track = here + rng.normal(0.0, 0.1, (track_t.size, 3))
+    early_t = np.array([e[0] for e in earlier])
+    early = here + np.array([[e[1], 0.0, 0.0] for e in earlier])
+    return np.concatenate([track, early]), np.concatenate([track_t, early_t])
+
+
+def test_extend_track_takes_a_hovering_drones_returns_across_a_longer_pause():
+    xyz, t = _hover_with_a_pause([(11.38, 0.0), (11.87, 0.1), (12.37, -0.1), (12.92, 0.0)])
+    member = t > 15.0
+    grown = extend_track(member, xyz, t, ~member, detector_params())
+    assert grown.all()
+    off = detector_params({"extend_hover_gap": 0.0})
+    assert not extend_track(member, xyz, t, ~member, off)[~member].any()
+
+
+@pytest.mark.parametrize(
+    "earlier",
+    [[(12.92, 3.0)], [(11.9, 0.0)]],  # beyond track_gate; beyond extend_hover_gap
+    ids=["off-the-spot", "too-long-before"],
+)
+def test_extend_track_hover_pause_takes_only_returns_on_the_spot_within_the_gap(earlier):
+    xyz, t = _hover_with_a_pause(earlier)
+    member = t > 15.0
+    assert not extend_track(member, xyz, t, ~member, detector_params())[~member].any()
