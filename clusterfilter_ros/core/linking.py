@@ -465,17 +465,18 @@ def extend_track(
     # A lone stray return at either end of the track (another object's, joined by the
     # clusterer) stays a member but does not define where the track was heading.
     inner = member & ~_stray_end_points(member, xyz, t, params)
+    hover_gap = float(params.extend_hover_gap)
     for forward in (True, False):
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
         while True:
             m = np.nonzero(inner)[0]
             edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
-            if vel is None and slow:
+            if vel is None and slow and hover_gap > gap:
                 # A lone return taken across a hover's pause: still hovering there.
                 vel = np.zeros(3)
             slow = vel is not None and float(np.linalg.norm(vel)) < params.min_speed
-            span = max(gap, float(params.extend_hover_gap)) if slow else gap
+            span = max(gap, hover_gap) if slow else gap
             if forward:
                 lo = np.searchsorted(pool_t, edge, side="right")
                 hi = np.searchsorted(pool_t, edge + span, side="right")
