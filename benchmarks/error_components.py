@@ -112,7 +112,7 @@ def error_by_age(
     return out
 
 
-def drone_return_times(sim, params) -> np.ndarray:
+def drone_return_times(sim) -> np.ndarray:
     """Stamps of the recording's labelled drone returns (per-point times where known)."""
     parts = [np.empty(0)]
     for i, frame in enumerate(sim.sequence.frames):
@@ -169,9 +169,7 @@ def main() -> int:
                     f"{c['cross_rms']:.3f} {c['lag']:+.3f} s"
                 )
                 if args.by_age and mode == "stream":
-                    ages = return_ages(
-                        pred.stamps, drone_return_times(sim, params), params.frame_period
-                    )
+                    ages = return_ages(pred.stamps, drone_return_times(sim), params.frame_period)
                     bins = error_by_age(
                         pred.stamps, pred.xyz, sim.drone_truth.stamps, truth_xyz, ages
                     )

@@ -460,7 +460,7 @@ def growth_only_points(
     ``labels``, ``xyz`` and ``t`` are the clustered points (after the filters). Returns
     also (M,) bool: which of the points are those below the floor.
     """
-    parts_xyz, parts_t = [], []
+    parts_xyz, parts_t, parts_floor = [], [], []
     if params.extend_denoised and denoised.any():
         dxyz, dt = cloud.xyz[denoised], cloud.t[denoised]
         if structure is not None and structure.size:
@@ -468,6 +468,7 @@ def growth_only_points(
             dxyz, dt = dxyz[off], dt[off]
         parts_xyz.append(dxyz)
         parts_t.append(dt)
+        parts_floor.append(np.zeros(dt.size, dtype=bool))
     if _grows_below_floor(params) and cloud.floor_t.size and selected:
         radius = float(linking_reach(params.extend_max_gap, params))
         fz = np.ascontiguousarray(cloud.floor_xyz[:, 2])
@@ -482,10 +483,12 @@ def growth_only_points(
         transient = ~persistent_mask(fxyz, ft, params)
         parts_xyz.append(fxyz[transient])
         parts_t.append(ft[transient])
-    n_denoised = parts_t[0].size if params.extend_denoised and denoised.any() else 0
-    gt = _stack(parts_t, np.empty(0))
-    floor = np.arange(gt.size) >= n_denoised
-    return _stack(parts_xyz, np.empty((0, 3), np.float32)), gt, floor
+        parts_floor.append(np.ones(int(transient.sum()), dtype=bool))
+    return (
+        _stack(parts_xyz, np.empty((0, 3), np.float32)),
+        _stack(parts_t, np.empty(0)),
+        _stack(parts_floor, np.empty(0, dtype=bool)),
+    )
 
 
 def _track_ends(
