@@ -100,6 +100,22 @@ class _TrackSample:
 
 
 @dataclass(frozen=True)
+class _TrackFit:
+    """Weighted fits through a track's recent samples (:meth:`StreamingDetector._predict`)."""
+
+    samples: tuple[_TrackSample, ...]
+    params: ParamSet  # the parameters they were made with
+    points: int  # returns in the samples
+    slope: np.ndarray  # (3,) velocity of the straight line (zero over < 2 frame periods)
+    mean: np.ndarray  # (3,) weighted mean position
+    tc: float  # weighted mean time
+    t_newest: float  # time of the newest sample
+    # (3, 3) quadratic coefficients about tc, when the track moves at least min_speed,
+    # 6 samples span 0.6 s and the fitted acceleration is at most max_accel; else None.
+    quadratic: np.ndarray | None
+
+
+@dataclass(frozen=True)
 class _TrackPiece:
     """A track's samples as arrays, times ascending (report_lag)."""
 
@@ -240,6 +256,7 @@ class StreamingDetector:
         self._chunk_points = 0
         self._denoise_recent: dict[str, voxel.SlidingVoxelCounts] = {}
         self._track: deque[_TrackSample] = deque()
+        self._fit_cache: _TrackFit | None = None
         self._selected_conf = 0.0
         self._now = -math.inf
         self._origin = math.nan
@@ -682,24 +699,45 @@ class StreamingDetector:
         if not newest:
             return None
         last = max(newest)
-        ts, ps, ws = _sample_arrays(_recent_samples(self._track, last, p))
-        n = int(ws.sum())
-        slope, mean, tc = _track_line(ts, ps, ws, p)
+        fit = self._track_fit(_recent_samples(self._track, last, p))
         age = stamp - last
-        moving = float(np.linalg.norm(slope)) >= p.min_speed
-        if moving and ts.size >= 6 and ts[-1] - ts[0] >= 0.6 and age <= p.max_extrapolation:
+        if fit.quadratic is not None and age <= p.max_extrapolation:
             # A well-sampled, fresh, moving track: a quadratic follows a turn or a change
             # of speed without the straight line's lag, unless its acceleration is
             # implausible. Beyond the newest sample it goes on along its tangent: the
             # curvature of a second of noisy samples is not extrapolated.
+            coef = fit.quadratic
+            x = stamp - fit.tc
+            x_last = min(x, fit.t_newest - fit.tc)
+            at_last = coef[0] + coef[1] * x_last + coef[2] * x_last * x_last
+            tangent = coef[1] + 2.0 * coef[2] * x_last
+            return at_last + tangent * (x - x_last), fit.points, age, fit.slope
+        return fit.mean + fit.slope * (stamp - fit.tc), fit.points, age, fit.slope
+
+    def _track_fit(self, samples: list[_TrackSample]) -> _TrackFit:
+        """The fits :meth:`_predict` reads, through these samples; the last one is reused
+        while the samples are the same (between a track's returns, every frame and every
+        history frame a re-clustering catches up through asks for it again)."""
+        p = self.params
+        cached = self._fit_cache
+        if (
+            cached is not None
+            and cached.params is p
+            and len(cached.samples) == len(samples)
+            and all(a is b for a, b in zip(cached.samples, samples, strict=True))
+        ):
+            return cached
+        ts, ps, ws = _sample_arrays(samples)
+        slope, mean, tc = _track_line(ts, ps, ws, p)
+        quadratic = None
+        moving = float(np.linalg.norm(slope)) >= p.min_speed
+        if moving and ts.size >= 6 and ts[-1] - ts[0] >= 0.6:
             coef = weighted_quadratic(ts - tc, ps, ws)
             if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
-                x = stamp - tc
-                x_last = min(x, ts[-1] - tc)
-                at_last = coef[0] + coef[1] * x_last + coef[2] * x_last * x_last
-                tangent = coef[1] + 2.0 * coef[2] * x_last
-                return at_last + tangent * (x - x_last), n, age, slope
-        return mean + slope * (stamp - tc), n, age, slope
+                quadratic = coef
+        fit = _TrackFit(tuple(samples), p, int(ws.sum()), slope, mean, tc, float(ts[-1]), quadratic)
+        self._fit_cache = fit
+        return fit
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
         """Append the frame's points within ``track_gate`` of the track's predicted

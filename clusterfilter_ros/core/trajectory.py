@@ -50,9 +50,11 @@ def weighted_line(
     """Weighted least-squares straight line through samples (t (S,), xyz (S, 3), weights
     (S,)): (velocity (3,), weighted mean position (3,), weighted mean time); the position
     at time ``x`` is ``mean + (x - tc) * velocity``. Zero velocity if all ``t`` are equal."""
-    tc = float(np.average(t, weights=w))
+    # The arithmetic of np.average (same order, same results) without its checks.
+    total = w.sum()
+    tc = float((t * w).sum() / total)
     dt = t - tc
-    mean = np.average(xyz, axis=0, weights=w)
+    mean = (xyz * w[:, None]).sum(axis=0) / total
     denom = float(np.sum(w * dt * dt))
     if denom <= 0:
         return np.zeros(3), mean, tc

@@ -268,6 +268,34 @@ def _restamped(frame: Frame, stamp: float) -> Frame:
     return Frame(stamp, frame.sensor, frame.xyz, frame.intensity, frame.point_time)
 
 
+def test_the_track_fit_is_reused_only_while_its_samples_and_parameters_stay_the_same():
+    from clusterfilter_ros.core.streaming import _TrackSample
+
+    times = np.arange(0.0, 1.01, 0.1)
+    path = [(10.0 + 4.0 * t + 1.5 * t * t, 5.0, 20.0) for t in times]
+    det = _tracked(times, path)
+    first = det._predict(1.2)
+    fit = det._fit_cache
+    assert fit is not None and fit.quadratic is not None
+    # Later stamps with the same samples: the same fit, evaluated further along.
+    second = det._predict(1.3)
+    assert det._fit_cache is fit
+    assert second[0][0] > first[0][0]
+    # A new sample: a new fit, equal to one made from scratch.
+    det._track.append(_TrackSample(1.1, np.array([15.0, 5.0, 20.0]), np.zeros((3, 3), np.float32)))
+    moved = det._predict(1.3)
+    assert det._fit_cache is not fit
+    fresh = _tracked([*times, 1.1], [*path, (15.0, 5.0, 20.0)])._predict(1.3)
+    np.testing.assert_array_equal(moved[0], fresh[0])
+    assert moved[1:3] == fresh[1:3]
+    # New parameters: refitted with them (a track_window too short for the quadratic).
+    refit = det._fit_cache
+    det.update_params({"track_window": 0.3})
+    narrow = det._predict(1.3)
+    assert det._fit_cache is not refit and det._fit_cache.quadratic is None
+    assert narrow[1] < moved[1]
+
+
 def test_one_far_future_stamp_is_rejected_and_the_stream_carries_on(scene):
     frames, _, _ = scene(duration=10.0, wall_points=300)
     half = len(frames) // 2
