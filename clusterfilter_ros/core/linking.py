@@ -296,17 +296,23 @@ def link_fragments(
     pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)[keep]
     tt = np.asarray(t, dtype=np.float64)[keep]
     fp = float(params.frame_period)
-    cid, ts, ps, w, side = _frame_samples(lab, pts, tt, k, fp)
     counts = np.bincount(lab, minlength=k)
+    cz = np.bincount(lab, weights=pts[:, 2], minlength=k) / np.maximum(counts, 1)
+    candidate = (counts > 0) & (counts <= params.max_cluster_points) & (cz >= params.min_centroid_z)
+    if np.count_nonzero(candidate) < 2:
+        return labels, k
+    # Only candidates' frame samples are needed (every step below is per cluster, so the
+    # others' points change nothing): large or low clusters, often most of the points, are
+    # left out before the sort.
+    of_candidate = candidate[lab]
+    if of_candidate.all():
+        cid, ts, ps, w, side = _frame_samples(lab, pts, tt, k, fp)
+    else:
+        sub = np.flatnonzero(of_candidate)
+        cid, ts, ps, w, side = _frame_samples(lab[sub], pts[sub], tt[sub], k, fp)
     n_frames = np.bincount(cid, minlength=k)
     mean_side = np.bincount(cid, weights=side, minlength=k) / np.maximum(n_frames, 1)
-    cz = np.bincount(lab, weights=pts[:, 2], minlength=k) / np.maximum(counts, 1)
-    eligible = (
-        (counts > 0)
-        & (counts <= params.max_cluster_points)
-        & (cz >= params.min_centroid_z)
-        & (mean_side <= params.max_local_extent)
-    )
+    eligible = candidate & (mean_side <= params.max_local_extent)
     if np.count_nonzero(eligible) < 2:
         return labels, k
     # A lone return at either end that the rest of the fragment did not head for (another
@@ -320,8 +326,9 @@ def link_fragments(
     end_sel, start_sel = _end_windows(cid, ts, t_first, t_last, k, params)
     tm_e, pm_e, v_e, has_e = _line_fits(cid, ts, ps, w, end_sel, k)
     tm_s, pm_s, v_s, has_s = _line_fits(cid, ts, ps, w, start_sel, k)
-    end_pos = pm_e + v_e * (t_last - tm_e)[:, None]
-    start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
+    with np.errstate(invalid="ignore"):  # NaN for the non-candidates (no samples): unread
+        end_pos = pm_e + v_e * (t_last - tm_e)[:, None]
+        start_pos = pm_s + v_s * (t_first - tm_s)[:, None]
     speed_e = np.linalg.norm(v_e, axis=1)
     speed_s = np.linalg.norm(v_s, axis=1)
     ends = _Ends(

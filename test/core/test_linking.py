@@ -78,6 +78,30 @@ def test_large_or_low_clusters_take_no_part():
     assert k == 2
 
 
+def test_large_and_low_clusters_beside_the_fragments_change_no_link():
+    # Fragments interleaved in time and in the arrays with a large cluster (over
+    # max_cluster_points) and a low one: the same links as without them, and those
+    # two keep labels of their own.
+    rng = np.random.default_rng(5)
+    xyz, t, lab = _fragments(rng, [0.0, 1.2, 2.3])
+    params = detector_params({"max_cluster_points": 60})
+    alone, k_alone = link_fragments(lab, xyz, t, params)
+    assert k_alone == 1
+    wall = np.array([30.0, 5.0, 10.0]) + rng.normal(0, 2.0, (80, 3))
+    low, t_low, _ = _fragments(rng, [0.5, 1.6], origin=(5.0, 5.0, 0.5))
+    all_xyz = np.concatenate([wall, xyz, low])
+    all_t = np.concatenate([rng.uniform(0.0, 3.0, 80), t, t_low])
+    all_lab = np.concatenate([np.full(80, 3), lab, np.full(t_low.size, 4)])
+    mixed = rng.permutation(all_t.size)
+    out, k = link_fragments(all_lab[mixed], all_xyz[mixed], all_t[mixed], params)
+    back = np.empty_like(out)
+    back[mixed] = out
+    assert k == k_alone + 2
+    fragments = back[80 : 80 + t.size]
+    assert np.array_equal(fragments == fragments[0], alone == alone[0])
+    assert len({back[0], back[-1], *fragments}) == 2 + len(set(alone))
+
+
 def test_extend_track_takes_points_on_the_path_only():
     rng = np.random.default_rng(5)
     xyz, t, _ = _fragments(rng, [0.0], length=1.0)
