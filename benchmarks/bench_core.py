@@ -43,6 +43,7 @@ SKLEARN_MAX_GB = 3.0
 SKLEARN_MAX_S = 40.0
 SCENARIO_20S = "default"
 SCENARIO_LONG = "long_mixed"
+OFFLINE_RUNS = 2
 
 
 def _push_all(
@@ -238,9 +239,14 @@ def bench_offline(sequences: list[tuple[str, Any]], params: ParamSet) -> dict[st
         p = params.copy(target_offset=list(np.asarray(sim.prism_offset, dtype=float)))
         gt = seq.ground_truth
         stamps = gt.stamps if gt is not None and len(gt) else None
-        tic = time.perf_counter()
-        result = detect_offline(seq.frames, p, timestamps=stamps)
-        wall = time.perf_counter() - tic
+        # Best of OFFLINE_RUNS: the first run of a larger input than any before in the
+        # process also pays for first-touching its memory, which on a fresh VM was more
+        # than the detection itself (120 s sequence: 4.7 s first, 2.5 s second).
+        wall = math.inf
+        for _ in range(OFFLINE_RUNS):
+            tic = time.perf_counter()
+            result = detect_offline(seq.frames, p, timestamps=stamps)
+            wall = min(wall, time.perf_counter() - tic)
         seconds[label] = wall
         duration = seq.end - seq.start
         n_points = int(sum(len(f) for f in seq.frames))
@@ -264,7 +270,7 @@ def bench_offline(sequences: list[tuple[str, Any]], params: ParamSet) -> dict[st
     return {
         "table": {
             "id": "core_offline",
-            "title": "Offline detection (detect_offline) wall time",
+            "title": f"Offline detection (detect_offline) wall time, best of {OFFLINE_RUNS} runs",
             "columns": [
                 "sequence",
                 "duration s",
