@@ -50,8 +50,10 @@ def weighted_line(
     """Weighted least-squares straight line through samples (t (S,), xyz (S, 3), weights
     (S,)): (velocity (3,), weighted mean position (3,), weighted mean time); the position
     at time ``x`` is ``mean + (x - tc) * velocity``. Zero velocity if all ``t`` are equal."""
-    # The arithmetic of np.average (same order, same results) without its checks.
+    # The arithmetic of np.average (same order, same results) without its other checks.
     total = w.sum()
+    if not total > 0:
+        raise ValueError("weighted_line: the weights must sum to more than zero")
     tc = float((t * w).sum() / total)
     dt = t - tc
     mean = (xyz * w[:, None]).sum(axis=0) / total

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core.trajectory import (
     fit_trajectory,
@@ -127,6 +128,14 @@ def test_weighted_line_recovers_a_line_and_handles_one_instant():
     assert np.allclose(slope, [2, 0, 0]) and np.isclose(tc, 1.0) and np.allclose(mean, [2, 1, 2])
     slope, mean, _ = weighted_line(np.zeros(2), xyz[:2], np.ones(2))
     assert np.allclose(slope, 0) and np.allclose(mean, [1, 1, 2])
+    # The same numbers as np.average, bit for bit; no weights, no line.
+    rng = np.random.default_rng(3)
+    tt, pp, ww = rng.random(9) + 1e3, rng.normal(size=(9, 3)) * 10, rng.integers(1, 9, 9) * 1.0
+    _, mean, tc = weighted_line(tt, pp, ww)
+    assert tc == float(np.average(tt, weights=ww))
+    assert np.array_equal(mean, np.average(pp, axis=0, weights=ww))
+    with pytest.raises(ValueError, match="weights"):
+        weighted_line(t, xyz, np.zeros(3))
 
 
 def _track_with_strays():
