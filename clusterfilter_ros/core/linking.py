@@ -304,12 +304,8 @@ def link_fragments(
     # Only candidates' frame samples are needed (every step below is per cluster, so the
     # others' points change nothing): large or low clusters, often most of the points, are
     # left out before the sort.
-    of_candidate = candidate[lab]
-    if of_candidate.all():
-        cid, ts, ps, w, side = _frame_samples(lab, pts, tt, k, fp)
-    else:
-        sub = np.flatnonzero(of_candidate)
-        cid, ts, ps, w, side = _frame_samples(lab[sub], pts[sub], tt[sub], k, fp)
+    sub = np.flatnonzero(candidate[lab])
+    cid, ts, ps, w, side = _frame_samples(lab[sub], pts[sub], tt[sub], k, fp)
     n_frames = np.bincount(cid, minlength=k)
     mean_side = np.bincount(cid, weights=side, minlength=k) / np.maximum(n_frames, 1)
     eligible = candidate & (mean_side <= params.max_local_extent)
