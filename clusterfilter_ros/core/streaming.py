@@ -668,7 +668,8 @@ class StreamingDetector:
         """Position at ``stamp`` from the track's last track_window seconds of samples
         (ending at its newest sample). The newest sample may be at most
         ``max_extrapolation`` old, or ``max_gap`` for a track slower than ``min_speed``
-        (a hovering drone seen once a second is where it was).
+        (a hovering drone seen once a second is where it was); such a slow track's
+        position past its newest sample is the one at that sample.
 
         ``stamp`` is a frame's stamp, the start of its scan: the frame's own returns,
         scanned over the next ``frame_period``, are part of its estimate (deviation 56).
@@ -679,8 +680,16 @@ class StreamingDetector:
         position, n, age, velocity = pred
         speed = float(np.linalg.norm(velocity))
         p = self.params
-        limit = max(p.max_extrapolation, p.max_gap) if speed < p.min_speed else p.max_extrapolation
-        return (position, n) if age <= limit else None
+        slow = speed < p.min_speed
+        limit = max(p.max_extrapolation, p.max_gap) if slow else p.max_extrapolation
+        if age > limit:
+            return None
+        if slow and age > 0.0:
+            # A track slower than min_speed (hovering, or drifting) stays where its line
+            # was at its newest sample: over a second of sparse returns a hovering drone's
+            # fitted velocity is mostly its returns' scatter (deviation 73).
+            position = position - velocity * age
+        return position, n
 
     def _predict(
         self, stamp: float, until: float | None = None

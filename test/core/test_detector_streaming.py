@@ -16,6 +16,7 @@ from clusterfilter_ros.core.streaming import (
     _track_samples,
     run_streaming,
 )
+from clusterfilter_ros.core.trajectory import weighted_line
 from clusterfilter_ros.errors import ParameterError
 
 
@@ -229,6 +230,27 @@ def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     assert _tracked(times, fast)._fit(stamp) is None
     assert _tracked(times, fast)._fit(times[-1] + 0.3) is not None
     assert _tracked(times, hover)._fit(times[-1] + 1.5) is None  # beyond max_gap
+
+
+def test_a_slow_track_is_not_extrapolated_past_its_newest_sample():
+    # A hovering drone seen in four frames over 0.9 s whose returns scatter so that
+    # their line drifts at 0.37 m/s (below min_speed, 1 m/s): 0.8 s after the newest
+    # sample the estimate is where the line was at that sample, not 0.29 m further on.
+    times = [0.0, 0.3, 0.6, 0.9]
+    path = np.array([(x, 5.0, 20.0) for x in (10.0, 10.0, 10.2, 10.3)])
+    det = _tracked(times, path)
+    slope, mean, tc = weighted_line(np.array(times), path, np.ones(4))
+    assert 0.3 < slope[0] < 1.0
+    for stamp in (0.9, 1.2, 1.7):
+        pos, _ = det._fit(stamp)
+        np.testing.assert_allclose(pos, mean + slope * (0.9 - tc), atol=1e-9)
+    # Within the samples the line is kept: a frame stamped before the newest sample
+    # (whose scan holds it) is estimated on the line at its stamp.
+    pos, _ = det._fit(0.85)
+    np.testing.assert_allclose(pos, mean + slope * (0.85 - tc), atol=1e-9)
+    # A moving track is still extrapolated along its line.
+    fast = _tracked(times, [(10.0 + 3.0 * t, 5.0, 20.0) for t in times])
+    assert fast._fit(1.2)[0][0] == pytest.approx(10.0 + 3.0 * 1.2, abs=1e-9)
 
 
 def test_the_estimate_for_a_frame_uses_the_returns_of_its_own_scan():
