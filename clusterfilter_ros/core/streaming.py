@@ -113,6 +113,9 @@ class _TrackFit:
     # (3, 3) quadratic coefficients about tc, when the track moves at least min_speed,
     # 6 samples span 0.6 s and the fitted acceleration is at most max_accel; else None.
     quadratic: np.ndarray | None
+    # The line's speed is below min_speed and within _STILL_SIGMAS standard errors of
+    # zero: as far as its samples tell, the track is not moving (deviation 73).
+    still: bool = False
 
 
 @dataclass(frozen=True)
@@ -126,6 +129,27 @@ class _TrackPiece:
     # Newest stamp at which push() reported a position on this track (inf: the current
     # track, which the detector-wide _last_live rule covers).
     reported_until: float = math.inf
+
+
+#: A slow track's fitted speed within this many standard errors of zero is taken for
+#: the scatter of its returns (deviation 73).
+_STILL_SIGMAS = 3.0
+
+
+def _speed_standard_error(
+    ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, slope: np.ndarray, mean: np.ndarray
+) -> float:
+    """Standard error (m/s) of the speed of the weighted line ``mean + (t - tc) * slope``
+    (``tc`` the weighted mean time) through samples weighted by their point counts (each
+    sample the mean of that many returns); inf with fewer than three samples or no
+    spread in time."""
+    dt = ts - float((ts * ws).sum() / ws.sum())
+    sxx = float((ws * dt * dt).sum())
+    if ts.size < 3 or not sxx > 0.0:
+        return math.inf
+    residual = ps - mean - dt[:, None] * slope
+    variance = (ws[:, None] * residual * residual).sum(axis=0) / (ts.size - 2)
+    return math.sqrt(float(variance.sum()) / sxx)
 
 
 def _track_line(
@@ -668,31 +692,23 @@ class StreamingDetector:
         """Position at ``stamp`` from the track's last track_window seconds of samples
         (ending at its newest sample). The newest sample may be at most
         ``max_extrapolation`` old, or ``max_gap`` for a track slower than ``min_speed``
-        (a hovering drone seen once a second is where it was); such a slow track's
-        position past its newest sample is the one at that sample.
+        (a hovering drone seen once a second is where it was); past its newest sample,
+        a track whose samples show no motion stays where it was then (deviation 73).
 
         ``stamp`` is a frame's stamp, the start of its scan: the frame's own returns,
         scanned over the next ``frame_period``, are part of its estimate (deviation 56).
         """
-        pred = self._predict(stamp, until=stamp + self.params.frame_period)
+        pred = self._predict(stamp, until=stamp + self.params.frame_period, hold_still=True)
         if pred is None:
             return None
         position, n, age, velocity = pred
         speed = float(np.linalg.norm(velocity))
         p = self.params
-        slow = speed < p.min_speed
-        limit = max(p.max_extrapolation, p.max_gap) if slow else p.max_extrapolation
-        if age > limit:
-            return None
-        if slow and age > 0.0:
-            # A track slower than min_speed (hovering, or drifting) stays where its line
-            # was at its newest sample: over a second of sparse returns a hovering drone's
-            # fitted velocity is mostly its returns' scatter (deviation 73).
-            position = position - velocity * age
-        return position, n
+        limit = max(p.max_extrapolation, p.max_gap) if speed < p.min_speed else p.max_extrapolation
+        return (position, n) if age <= limit else None
 
     def _predict(
-        self, stamp: float, until: float | None = None
+        self, stamp: float, until: float | None = None, hold_still: bool = False
     ) -> tuple[np.ndarray, int, float, np.ndarray] | None:
         """(position, points, age of the newest sample, velocity) at ``stamp`` from a weighted
         fit over the samples up to ``until`` (default ``stamp``): the last track_window
@@ -701,7 +717,9 @@ class StreamingDetector:
         line or, for a track at least ``min_speed`` fast, a quadratic when at least 6
         samples span 0.6 s, the newest is at most ``max_extrapolation`` old and the fitted
         acceleration is at most ``max_accel``; past its newest sample the quadratic is
-        continued along its tangent there (deviation 56)."""
+        continued along its tangent there (deviation 56). With ``hold_still``, a line
+        whose samples show no motion (:attr:`_TrackFit.still`) is not continued past the
+        newest sample: the position is the line's there (deviation 73)."""
         p = self.params
         cutoff = stamp if until is None else until
         newest = [s.t for s in self._track if s.t <= cutoff]
@@ -721,7 +739,8 @@ class StreamingDetector:
             at_last = coef[0] + coef[1] * x_last + coef[2] * x_last * x_last
             tangent = coef[1] + 2.0 * coef[2] * x_last
             return at_last + tangent * (x - x_last), fit.points, age, fit.slope
-        return fit.mean + fit.slope * (stamp - fit.tc), fit.points, age, fit.slope
+        at = last if hold_still and fit.still and age > 0.0 else stamp
+        return fit.mean + fit.slope * (at - fit.tc), fit.points, age, fit.slope
 
     def _track_fit(self, samples: list[_TrackSample]) -> _TrackFit:
         """The fits :meth:`_predict` reads, through these samples; the last one is reused
@@ -744,7 +763,13 @@ class StreamingDetector:
             coef = weighted_quadratic(ts - tc, ps, ws)
             if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
                 quadratic = coef
-        fit = _TrackFit(tuple(samples), p, int(ws.sum()), slope, mean, tc, float(ts[-1]), quadratic)
+        speed = float(np.linalg.norm(slope))
+        still = speed < p.min_speed and (
+            speed == 0.0 or speed < _STILL_SIGMAS * _speed_standard_error(ts, ps, ws, slope, mean)
+        )
+        fit = _TrackFit(
+            tuple(samples), p, int(ws.sum()), slope, mean, tc, float(ts[-1]), quadratic, still
+        )
         self._fit_cache = fit
         return fit
 

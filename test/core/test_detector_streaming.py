@@ -232,15 +232,16 @@ def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     assert _tracked(times, hover)._fit(times[-1] + 1.5) is None  # beyond max_gap
 
 
-def test_a_slow_track_is_not_extrapolated_past_its_newest_sample():
+def test_a_still_track_is_not_extrapolated_past_its_newest_sample():
     # A hovering drone seen in four frames over 0.9 s whose returns scatter so that
-    # their line drifts at 0.37 m/s (below min_speed, 1 m/s): 0.8 s after the newest
-    # sample the estimate is where the line was at that sample, not 0.29 m further on.
+    # their line drifts at 0.23 m/s, below min_speed (1 m/s) and within three standard
+    # errors (0.21 m/s each) of zero: 0.8 s after the newest sample the estimate is where
+    # the line was at that sample, not 0.19 m further on.
     times = [0.0, 0.3, 0.6, 0.9]
-    path = np.array([(x, 5.0, 20.0) for x in (10.0, 10.0, 10.2, 10.3)])
+    path = np.array([(x, 5.0, 20.0) for x in (10.0, 10.25, 10.05, 10.3)])
     det = _tracked(times, path)
-    slope, mean, tc = weighted_line(np.array(times), path, np.ones(4))
-    assert 0.3 < slope[0] < 1.0
+    slope, mean, tc = weighted_line(np.array(times), path, np.full(4, 3.0))
+    assert slope[0] == pytest.approx(0.233, abs=0.001)
     for stamp in (0.9, 1.2, 1.7):
         pos, _ = det._fit(stamp)
         np.testing.assert_allclose(pos, mean + slope * (0.9 - tc), atol=1e-9)
@@ -248,9 +249,40 @@ def test_a_slow_track_is_not_extrapolated_past_its_newest_sample():
     # (whose scan holds it) is estimated on the line at its stamp.
     pos, _ = det._fit(0.85)
     np.testing.assert_allclose(pos, mean + slope * (0.85 - tc), atol=1e-9)
-    # A moving track is still extrapolated along its line.
+    # A drone setting off from a hover at 0.7 m/s, seen in every frame: as slow, but its
+    # samples lie on the line, so it is extrapolated.
+    times = np.arange(0.0, 1.0, 0.1)
+    leaving = [(10.0 + 0.7 * t + 0.02 * (-1) ** i, 5.0, 20.0) for i, t in enumerate(times)]
+    pos, _ = _tracked(times, leaving)._fit(1.4)
+    assert pos[0] == pytest.approx(10.0 + 0.7 * 1.4, abs=0.05)
+    # A moving track is extrapolated along its line, as before.
     fast = _tracked(times, [(10.0 + 3.0 * t, 5.0, 20.0) for t in times])
     assert fast._fit(1.2)[0][0] == pytest.approx(10.0 + 3.0 * 1.2, abs=1e-9)
+
+
+def test_the_speed_standard_error_of_a_track_line():
+    from clusterfilter_ros.core.streaming import _speed_standard_error
+
+    rng = np.random.default_rng(3)
+    ts = np.linspace(0.0, 1.0, 11)
+    ws = rng.integers(1, 5, ts.size).astype(float)
+    truth = np.array([0.5, -0.2, 0.1])
+    ps = 10.0 + ts[:, None] * truth + rng.normal(0.0, 0.1, (ts.size, 3)) / np.sqrt(ws)[:, None]
+    slope, mean, tc = weighted_line(ts, ps, ws)
+    se = _speed_standard_error(ts, ps, ws, slope, mean)
+    # Per axis, the textbook weighted least-squares standard error of the slope.
+    dt = ts - tc
+    resid = ps - mean - dt[:, None] * slope
+    per_axis = (ws[:, None] * resid**2).sum(axis=0) / (ts.size - 2) / (ws * dt**2).sum()
+    assert se == pytest.approx(float(np.sqrt(per_axis.sum())))
+    assert 0.01 < se < 0.5
+    # Exactly on a line: zero; too few samples or no spread in time: unknown (inf).
+    on_line = 10.0 + ts[:, None] * truth
+    slope, mean, _ = weighted_line(ts, on_line, ws)
+    assert _speed_standard_error(ts, on_line, ws, slope, mean) == pytest.approx(0.0, abs=1e-9)
+    assert _speed_standard_error(ts[:2], ps[:2], ws[:2], slope, mean) == np.inf
+    flat = np.zeros(3)
+    assert _speed_standard_error(np.ones(4), ps[:4], ws[:4], flat, ps[:4].mean(0)) == np.inf
 
 
 def test_the_estimate_for_a_frame_uses_the_returns_of_its_own_scan():
