@@ -14,6 +14,7 @@ import contextlib
 import glob
 import os
 import shutil
+import sqlite3
 import tempfile
 import time
 from collections.abc import Iterator
@@ -32,11 +33,18 @@ def _ensure_parent(path: Path) -> None:
         raise InputError(f"cannot create folder {path.parent}: {exc.strerror or exc}") from exc
 
 
+def _reason(exc: OSError | sqlite3.Error) -> str:
+    """The OS (or sqlite: "disk I/O error", from rosbags' bag writer) reason, one line."""
+    text = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def _output_error(target: Path, exc: OSError) -> InputError:
     """A one-line error naming the output that could not be written."""
-    if target.is_dir():
-        return InputError(f"cannot write {target}: it is a folder")
-    return InputError(f"cannot write {target}: {exc.strerror or exc}")
+    with contextlib.suppress(OSError):
+        if target.is_dir():
+            return InputError(f"cannot write {target}: it is a folder")
+    return InputError(f"cannot write {target}: {_reason(exc)}")
 
 
 def _read_umask() -> int:
@@ -151,26 +159,34 @@ def atomic_output_dir(
     if not create:
         tmp.rmdir()
     try:
-        yield tmp
-        if target.exists():
-            if target.is_dir() and not any(target.iterdir()):
-                target.rmdir()
-            else:
-                old = Path(
-                    tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent)
-                )
-                old.rmdir()
-                os.rename(target, old)
-                os.rename(tmp, target)
-                if old.is_dir():
-                    shutil.rmtree(old, ignore_errors=True)
-                else:
-                    old.unlink(missing_ok=True)
-                return
-        os.rename(tmp, target)
+        try:
+            yield tmp
+            _move_dir_into_place(tmp, target)
+        except (OSError, sqlite3.Error) as exc:  # disk full, quota, I/O error, ...
+            raise InputError(f"cannot write {target}: {_reason(exc)}") from exc
     except BaseException:
         if tmp.is_dir():
             shutil.rmtree(tmp, ignore_errors=True)
         elif tmp.exists():
             tmp.unlink(missing_ok=True)
         raise
+
+
+def _move_dir_into_place(tmp: Path, target: Path) -> None:
+    """Rename the finished folder ``tmp`` to ``target``, replacing what is there."""
+    if target.exists():
+        if target.is_dir() and not any(target.iterdir()):
+            target.rmdir()
+        else:
+            old = Path(
+                tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".old", dir=target.parent)
+            )
+            old.rmdir()
+            os.rename(target, old)
+            os.rename(tmp, target)
+            if old.is_dir():
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                old.unlink(missing_ok=True)
+            return
+    os.rename(tmp, target)

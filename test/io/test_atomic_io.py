@@ -2,10 +2,23 @@
 
 from __future__ import annotations
 
+import errno
 import os
+import sqlite3
 import time
+from pathlib import Path
 
-from clusterfilter_ros.io.atomic import atomic_write_text, remove_stale_temporaries
+import numpy as np
+import pytest
+
+from clusterfilter_ros.core.frame import MID360, Frame
+from clusterfilter_ros.errors import InputError
+from clusterfilter_ros.io.atomic import (
+    atomic_output_dir,
+    atomic_write_text,
+    remove_stale_temporaries,
+)
+from clusterfilter_ros.io.challenge import write_frames_folder
 
 
 def test_stale_temporary_of_a_killed_writer_is_removed_by_the_next_write(tmp_path):
@@ -33,3 +46,62 @@ def test_remove_stale_temporaries_counts_and_tolerates_a_missing_folder(tmp_path
     os.utime(tmp, (0, 0))
     assert remove_stale_temporaries(target) == 1
     assert remove_stale_temporaries(tmp_path / "missing" / "b.csv") == 0
+
+
+def _frames(n: int = 3) -> list[Frame]:
+    xyz = np.arange(30, dtype=np.float32).reshape(10, 3)
+    return [Frame(1706255621.6 + 0.1 * i, MID360, xyz) for i in range(n)]
+
+
+@pytest.mark.parametrize(
+    "exc, reason",
+    [
+        (OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)), os.strerror(errno.ENOSPC)),
+        (sqlite3.OperationalError("disk I/O error"), "disk I/O error"),
+    ],
+)
+def test_write_error_in_an_output_folder_is_an_input_error(
+    tmp_path: Path, exc: Exception, reason: str
+) -> None:
+    out = tmp_path / "out"
+    with pytest.raises(InputError, match=f"cannot write {out}: {reason}$"):
+        with atomic_output_dir(out) as tmp:
+            (tmp / "half").write_text("x")
+            raise exc
+    assert list(tmp_path.iterdir()) == []  # temporary folder removed, nothing in place
+
+
+def test_disk_full_while_writing_a_sequence_folder(tmp_path: Path, monkeypatch) -> None:
+    out = tmp_path / "seq"
+    out.mkdir()
+    (out / "keep.txt").write_text("previous result")
+
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(np, "save", full)
+    with pytest.raises(InputError, match="No space left on device"):
+        write_frames_folder(_frames(), out, overwrite=True)
+    assert [p.name for p in tmp_path.iterdir()] == ["seq"]
+    assert (out / "keep.txt").read_text() == "previous result"
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_write_error_while_writing_a_ros2_bag(tmp_path: Path, monkeypatch, storage: str) -> None:
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import storage_mcap, storage_sqlite3
+
+    from clusterfilter_ros.io.bags import write_bag_frames
+
+    def io_error(*args: object, **kwargs: object) -> None:
+        if storage == "sqlite3":
+            raise sqlite3.OperationalError("disk I/O error")
+        raise OSError(errno.EFBIG, os.strerror(errno.EFBIG))
+
+    module = storage_sqlite3.Sqlite3Writer if storage == "sqlite3" else storage_mcap.McapWriter
+    monkeypatch.setattr(module, "write", io_error)
+    out = tmp_path / "bag"
+    reason = "disk I/O error" if storage == "sqlite3" else os.strerror(errno.EFBIG)
+    with pytest.raises(InputError, match=f"cannot write {out}: {reason}$"):
+        write_bag_frames(_frames(), out, storage=storage)
+    assert list(tmp_path.iterdir()) == []
