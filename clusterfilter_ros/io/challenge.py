@@ -70,10 +70,23 @@ def _natural_key(name: str) -> list[object]:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
 
 
+def access_error(path: str | os.PathLike[str], exc: OSError) -> InputError:
+    """A one-line :class:`InputError` for a path the OS refused to inspect or list
+    (permission denied, symlink loop, I/O error), naming the path and the OS reason."""
+    culprit = exc.filename if exc.filename is not None else path
+    return InputError(f"{os.fsdecode(culprit)}: cannot access ({exc.strerror or exc})")
+
+
 def is_sequence_folder(path: str | os.PathLike[str]) -> bool:
-    """True if ``path`` is a folder with a ``lidar_360`` or ``livox_avia`` sub-folder."""
+    """True if ``path`` is a folder with a ``lidar_360`` or ``livox_avia`` sub-folder.
+
+    Raises :class:`InputError` if the OS refuses to look (unreadable folder, symlink loop).
+    """
     p = Path(path)
-    return p.is_dir() and any((p / name).is_dir() for name in SENSOR_FOLDERS)
+    try:
+        return p.is_dir() and any((p / name).is_dir() for name in SENSOR_FOLDERS)
+    except OSError as exc:
+        raise access_error(p, exc) from exc
 
 
 def list_sequence_folders(root: str | os.PathLike[str]) -> list[Path]:
@@ -89,7 +102,10 @@ def list_sequence_folders(root: str | os.PathLike[str]) -> list[Path]:
         raise InputError(f"{p}: not a folder (expected a challenge sequence folder)")
     if is_sequence_folder(p):
         return [p]
-    children = [c for c in p.iterdir() if is_sequence_folder(c)]
+    try:
+        children = [c for c in p.iterdir() if is_sequence_folder(c)]
+    except OSError as exc:
+        raise access_error(p, exc) from exc
     if not children:
         raise InputError(
             f"{p}: not a challenge sequence folder (no lidar_360/ or livox_avia/ inside) "
@@ -129,7 +145,14 @@ def _npy_files(folder: Path) -> list[Path]:
         entries = list(os.scandir(folder))
     except OSError as exc:
         raise InputError(f"{folder}: cannot list folder: {exc.strerror or exc}") from exc
-    return [Path(e.path) for e in entries if e.name.endswith(".npy") and e.is_file()]
+    files = []
+    for e in entries:
+        try:
+            if e.name.endswith(".npy") and e.is_file():
+                files.append(Path(e.path))
+        except OSError as exc:  # a symlink loop, ...
+            raise access_error(e.path, exc) from exc
+    return files
 
 
 def list_lidar_files(

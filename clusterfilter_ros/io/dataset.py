@@ -31,15 +31,22 @@ OUTPUT_FORMATS = ("mmaud", "rosbag2", "rosbag1")
 def is_bag(path: str | os.PathLike[str]) -> bool:
     """True if ``path`` is a ROS 1 ``.bag``, a bare ``.db3``/``.mcap`` or a ROS 2 bag folder."""
     p = Path(path)
-    if p.is_dir():
-        return (p / "metadata.yaml").is_file() or any(p.glob("*.db3")) or any(p.glob("*.mcap"))
-    return p.is_file() and p.suffix.lower() in (".bag", ".db3", ".mcap")
+    try:
+        if p.is_dir():
+            return (p / "metadata.yaml").is_file() or any(p.glob("*.db3")) or any(p.glob("*.mcap"))
+        return p.is_file() and p.suffix.lower() in (".bag", ".db3", ".mcap")
+    except OSError as exc:  # unreadable folder, symlink loop, ...
+        raise challenge.access_error(p, exc) from exc
 
 
 def detect_input_kind(path: str | os.PathLike[str]) -> str:
     """Which of :data:`INPUT_KINDS` ``path`` is; :class:`InputError` if none."""
     p = Path(path)
-    if not p.exists():
+    try:
+        exists = p.exists()
+    except OSError as exc:
+        raise challenge.access_error(p, exc) from exc
+    if not exists:
         raise InputError(f"{p}: no such file or folder")
     if is_bag(p):
         return "rosbag1" if p.is_file() and p.suffix.lower() == ".bag" else "rosbag2"

@@ -10,6 +10,7 @@ import pytest
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame, Sequence, TimedPositions
 from clusterfilter_ros.errors import InputError
 from clusterfilter_ros.io.challenge import (
+    is_sequence_folder,
     iter_frames_folder,
     list_sequence_folders,
     parse_stamp,
@@ -195,3 +196,37 @@ def test_truncated_npy(tmp_path: Path) -> None:
     path.write_bytes(path.read_bytes()[:500])
     with pytest.raises(InputError, match="5.0.npy"):
         read_sequence_folder(tmp_path / "s")
+
+
+def test_symlink_loop_among_the_npy_files_names_the_file(tmp_path: Path) -> None:
+    seq_dir = tmp_path / "s"
+    _write_raw(seq_dir / "lidar_360", "1.0.npy", np.ones((3, 3)))
+    loop = seq_dir / "lidar_360" / "2.0.npy"
+    loop.symlink_to(loop.name)  # a link to itself: stat fails with ELOOP
+    with pytest.raises(InputError, match=r"2\.0\.npy: cannot access \(Too many levels"):
+        read_sequence_folder(seq_dir)
+
+
+def test_unreadable_folder_is_an_input_error(tmp_path: Path, monkeypatch) -> None:
+    # chmod does not stop root (CI runs as root): make the OS refuse by monkeypatching.
+    seq_dir = tmp_path / "s"
+    _write_raw(seq_dir / "lidar_360", "1.0.npy", np.ones((3, 3)))
+    real_is_dir = Path.is_dir
+
+    def is_dir(self: Path) -> bool:
+        if self.parent == seq_dir:
+            raise PermissionError(13, "Permission denied", str(self))
+        return real_is_dir(self)
+
+    monkeypatch.setattr(Path, "is_dir", is_dir)
+    with pytest.raises(InputError, match=r"s/lidar_360: cannot access \(Permission denied\)"):
+        is_sequence_folder(seq_dir)
+
+    (tmp_path / "root").mkdir()
+
+    def iterdir(self: Path):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    with pytest.raises(InputError, match=r"root: cannot access \(Permission denied\)"):
+        list_sequence_folders(tmp_path / "root")
