@@ -181,14 +181,51 @@ def load_npy(path: Path) -> np.ndarray:
     if magic != _NPY_MAGIC:
         what = "empty file" if not magic else "no .npy header"
         raise InputError(f"{path}: not a .npy file ({what}; corrupt or wrongly named?)")
+    _check_npy_size(path)
     try:
         arr = np.load(path, allow_pickle=False)
+    except MemoryError as exc:  # last resort: a header that _check_npy_size let through
+        raise InputError(f"{path}: array too large to load into memory") from exc
     except (OSError, ValueError, EOFError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"{path}: not a readable .npy file ({msg})") from exc
     if not isinstance(arr, np.ndarray):
         raise InputError(f"{path}: expected one array, found {type(arr).__name__}")
     return arr
+
+
+def _check_npy_size(path: Path) -> None:
+    """Refuse a .npy file shorter than the array its header describes.
+
+    A corrupt header claiming a huge shape would otherwise make ``np.load`` try to
+    allocate it (``MemoryError``) before noticing the file is too short. Headers this
+    function cannot parse are left for ``np.load`` to report.
+    """
+    readers = {
+        (1, 0): np.lib.format.read_array_header_1_0,
+        (2, 0): np.lib.format.read_array_header_2_0,
+    }
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version not in readers:
+                return
+            shape, _, dtype = readers[version](fh)
+            data_bytes = os.fstat(fh.fileno()).st_size - fh.tell()
+    except (OSError, ValueError, EOFError, SyntaxError, TypeError):
+        return  # np.load reports these with its own message
+    if dtype.hasobject:
+        return  # np.load refuses pickled arrays
+    count = 1
+    for n in shape:
+        count *= int(n)
+    claimed = count * dtype.itemsize
+    if data_bytes < claimed:
+        raise InputError(
+            f"{path}: truncated or corrupt .npy file (its header claims shape "
+            f"{tuple(int(n) for n in shape)} of {dtype}, {claimed} bytes, but the file holds "
+            f"{data_bytes} bytes of data)"
+        )
 
 
 def valid_rows(xyz: np.ndarray) -> np.ndarray:

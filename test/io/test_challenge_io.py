@@ -230,3 +230,36 @@ def test_unreadable_folder_is_an_input_error(tmp_path: Path, monkeypatch) -> Non
     monkeypatch.setattr(Path, "iterdir", iterdir)
     with pytest.raises(InputError, match=r"root: cannot access \(Permission denied\)"):
         list_sequence_folders(tmp_path / "root")
+
+
+def _npy_with_header(path: Path, shape: tuple[int, ...], data: bytes) -> None:
+    header = f"{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}"
+    header = header + " " * (117 - len(header)) + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(
+        b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode() + data
+    )
+
+
+def test_npy_header_claiming_a_huge_shape_is_refused_before_loading(
+    tmp_path: Path, monkeypatch
+) -> None:
+    path = tmp_path / "s" / "lidar_360" / "1.0.npy"
+    _npy_with_header(path, (10_000_000_000, 3), b"\0" * 100)
+    loaded = []
+    monkeypatch.setattr(np, "load", lambda *a, **k: loaded.append(a) or np.ones((1, 3)))
+    with pytest.raises(InputError, match=r"1\.0\.npy: truncated .*\(10000000000, 3\)") as info:
+        read_sequence_folder(tmp_path / "s")
+    assert "100 bytes of data" in str(info.value)
+    assert not loaded  # np.load never tried to allocate 240 GB
+
+
+def test_memory_error_while_loading_an_npy_is_an_input_error(tmp_path: Path, monkeypatch) -> None:
+    _write_raw(tmp_path / "s" / "lidar_360", "1.0.npy", np.ones((3, 3)))
+
+    def no_memory(*args: object, **kwargs: object) -> np.ndarray:
+        raise MemoryError("Unable to allocate 224. GiB")
+
+    monkeypatch.setattr(np, "load", no_memory)
+    with pytest.raises(InputError, match=r"1\.0\.npy: array too large to load into memory"):
+        read_sequence_folder(tmp_path / "s")
