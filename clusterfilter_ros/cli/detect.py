@@ -56,12 +56,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def read_timestamps(path: str) -> dict:
     """Stamps from a file: {sequence name or None: (M,) float64 array}."""
-    import csv
-    import io
-
     import numpy as np
 
     from clusterfilter_ros.errors import InputError
+    from clusterfilter_ros.io.groundtruth import csv_rows
 
     p = Path(path)
     if p.is_dir():
@@ -74,7 +72,7 @@ def read_timestamps(path: str) -> dict:
         raise InputError(f"{p}: no such timestamps file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{p}: cannot read timestamps ({exc})") from None
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    rows = csv_rows(text, p)
     if not rows:
         raise InputError(f"{p}: no timestamps in file")
     header = [c.strip().lower() for c in rows[0]]

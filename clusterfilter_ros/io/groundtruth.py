@@ -38,6 +38,16 @@ def read_ground_truth(path: str | os.PathLike[str]) -> TimedPositions:
     raise InputError(f"{p}: no ground_truth/ folder and no <stamp>.npy files inside")
 
 
+def csv_rows(text: str, path: str | os.PathLike[str]) -> list[list[str]]:
+    """The non-blank rows of CSV ``text`` read from ``path``; a malformed file (a field
+    over the csv module's size limit, ...) is an :class:`InputError` naming the line."""
+    reader = csv.reader(io.StringIO(text))
+    try:
+        return [r for r in reader if r and any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise InputError(f"{path}: line {reader.line_num}: not a valid CSV row ({exc})") from None
+
+
 def _column_array(values: list[str]) -> np.ndarray:
     try:
         return np.array(values, dtype=np.float64)
@@ -58,7 +68,7 @@ def read_positions_csv(path: str | os.PathLike[str]) -> TimedPositions:
         raise InputError(f"{p}: no such file") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{p}: cannot read as text ({exc})") from exc
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    rows = csv_rows(text, p)
     if not rows:
         raise InputError(f"{p}: empty file (expected a header timestamp,x,y,z)")
     header = [c.strip().lower() for c in rows[0]]

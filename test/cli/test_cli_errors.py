@@ -85,6 +85,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (root / "text_value.csv").write_text("timestamp,x,y,z\n100.0,1,2,zz\n")
     (root / "nan_stamp.csv").write_text("timestamp,x,y,z\n100.0,1,2,3\nnan,1,2,3\n")
     (root / "binary.csv").write_bytes(b"\xff\xfe\x00garbage\x00\x01")
+    (root / "huge_field.csv").write_text(
+        "timestamp,x,y,z\n100.0,1,2,3\n" + "1" * 200_000 + ",1,2,3\n"
+    )
     return root
 
 
@@ -111,6 +114,11 @@ CASES = [
     ("detect-output-under-file", "detect {R}/seq -o {R}/file.txt/o.csv", "{R}/file.txt is a file"),
     ("detect-missing-timestamps", "detect {R}/seq -o {T}/o.csv --timestamps {R}/no.txt", "no.txt"),
     (
+        "detect-timestamps-huge-field",
+        "detect {R}/seq -o {T}/o.csv --timestamps {R}/huge_field.csv",
+        "{R}/huge_field.csv: line 3",
+    ),
+    (
         "detect-binary-params-file",
         "detect {R}/seq -o {T}/o.csv --params-file {R}/binary.csv",
         "{R}/binary.csv",
@@ -134,6 +142,11 @@ CASES = [
     ("evaluate-pred-text", "evaluate {R}/text_value.csv {R}/seq", "{R}/text_value.csv"),
     ("evaluate-pred-nan-stamp", "evaluate {R}/nan_stamp.csv {R}/seq", "{R}/nan_stamp.csv: line 3"),
     ("evaluate-pred-binary", "evaluate {R}/binary.csv {R}/seq", "{R}/binary.csv"),
+    (
+        "evaluate-pred-huge-field",
+        "evaluate {R}/huge_field.csv {R}/seq",
+        "{R}/huge_field.csv: line 3",
+    ),
     ("evaluate-pred-folder", "evaluate {R}/empty {R}/seq", "{R}/empty"),
     ("evaluate-missing-gt", "evaluate {R}/pred.csv {R}/nope", "{R}/nope"),
     ("evaluate-empty-gt-folder", "evaluate {R}/pred.csv {R}/empty", "{R}/empty"),

@@ -94,3 +94,10 @@ def test_csv_with_bom_and_crlf(tmp_path: Path) -> None:
     path.write_bytes("\ufefftimestamp,x,y,z\r\n1.5,1,2,3\r\n".encode())
     pos = read_positions_csv(path)
     np.testing.assert_array_equal(pos.xyz, [[1, 2, 3]])
+
+
+def test_csv_field_over_the_csv_size_limit_names_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "gt.csv"
+    path.write_text("timestamp,x,y,z\n1.0,1,2,3\n" + "1" * 200_000 + ",1,2,3\n")
+    with pytest.raises(InputError, match=r"gt\.csv: line 3: not a valid CSV row \(field larger"):
+        read_positions_csv(path)
