@@ -37,6 +37,8 @@ from clusterfilter_ros.io.livox import (
     is_custom_msg_type,
 )
 from clusterfilter_ros.io.pointcloud2 import (
+    MAX_ROS1_SEC,
+    MAX_ROS2_SEC,
     decode_pointcloud2,
     frame_to_pointcloud2,
     seconds_to_stamp,
@@ -472,7 +474,9 @@ class _MessageBuilder:
         return POINTCLOUD2 if self.lidar_msg == "PointCloud2" else "livox_ros_driver2/msg/CustomMsg"
 
     def header(self, stamp: float) -> Any:
-        sec, nanosec = seconds_to_stamp(stamp)
+        sec, nanosec = seconds_to_stamp(
+            stamp, MAX_ROS1_SEC if self.ros_version == 1 else MAX_ROS2_SEC
+        )
         kwargs: dict[str, Any] = {
             "stamp": self.Time(sec=sec, nanosec=nanosec),
             "frame_id": self.frame_id,

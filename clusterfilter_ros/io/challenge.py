@@ -49,14 +49,28 @@ class StampedFile:
     path: Path
 
 
+#: Largest stamp (s) a ROS header can hold (ROS 1 ``time.secs`` is a uint32).
+MAX_STAMP_SECONDS = 2**32 - 1
+
+
 def parse_stamp(path: Path) -> float:
-    """Seconds from a challenge file name (``1706255621.6.npy`` -> 1706255621.6)."""
+    """Seconds from a challenge file name (``1706255621.6.npy`` -> 1706255621.6).
+
+    A time beyond :data:`MAX_STAMP_SECONDS` (a name in milli- or nanoseconds, say) is an
+    :class:`InputError`.
+    """
     stem = path.name[: -len(".npy")] if path.name.endswith(".npy") else path.stem
     if not _STAMP_RE.match(stem):
         raise InputError(
             f"{path}: file name is not a timestamp in seconds (like 1706255621.600227.npy)"
         )
-    return float(stem)
+    stamp = float(stem)
+    if not stamp <= MAX_STAMP_SECONDS:  # also catches inf from hundreds of digits
+        raise InputError(
+            f"{path}: file name is not a time in seconds up to {MAX_STAMP_SECONDS} "
+            "(names must be seconds like 1706255599.999223.npy, not milli- or nanoseconds)"
+        )
+    return stamp
 
 
 def format_stamp(stamp: float) -> str:

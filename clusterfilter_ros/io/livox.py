@@ -25,7 +25,12 @@ import numpy as np
 
 from clusterfilter_ros.core.frame import Frame
 from clusterfilter_ros.errors import InputError
-from clusterfilter_ros.io.pointcloud2 import finite_rows, seconds_to_stamp
+from clusterfilter_ros.io.pointcloud2 import (
+    MAX_ROS1_SEC,
+    MAX_ROS2_SEC,
+    finite_rows,
+    seconds_to_stamp,
+)
 
 #: Message type names (ROS 2 form) of the two drivers.
 CUSTOM_MSG_TYPES = ("livox_ros_driver/msg/CustomMsg", "livox_ros_driver2/msg/CustomMsg")
@@ -259,7 +264,7 @@ def encode_custom_msg(
     frame's intensity clipped to 0..255 (0 if absent).
     """
     n = len(frame)
-    sec, nanosec = seconds_to_stamp(frame.stamp)
+    sec, nanosec = seconds_to_stamp(frame.stamp, MAX_ROS1_SEC if ros_version == 1 else MAX_ROS2_SEC)
     stamp_ns = sec * 1_000_000_000 + nanosec
     rel_ns = (
         np.zeros(n, np.int64)

@@ -152,16 +152,29 @@ def stamp_to_seconds(stamp: Any) -> float:
     return float(sec) + float(nanosec) * 1e-9
 
 
-def seconds_to_stamp(seconds: float) -> tuple[int, int]:
+#: Largest ``sec`` of a ROS 1 time (uint32) and of a ROS 2 time (int32).
+MAX_ROS1_SEC = 2**32 - 1
+MAX_ROS2_SEC = 2**31 - 1
+
+
+def seconds_to_stamp(
+    seconds: float, max_sec: int = MAX_ROS1_SEC, min_sec: int = 0
+) -> tuple[int, int]:
     """``(sec, nanosec)`` for a time in seconds, nanoseconds rounded, carry handled.
 
     Goes through the float's shortest decimal form, so ``1706255621.600227`` gives
-    nanosec ``600227000`` (not the binary float's ``600227117``).
+    nanosec ``600227000`` (not the binary float's ``600227117``). A time that is not
+    finite or whose ``sec`` is outside ``min_sec .. max_sec`` (:data:`MAX_ROS2_SEC` for
+    ROS 2 messages) is an :class:`InputError`.
     """
     if not np.isfinite(seconds):
         raise InputError(f"cannot make a ROS stamp from {seconds!r}")
     total_ns = int((Decimal(repr(float(seconds))) * 1_000_000_000).to_integral_value())
     sec, nanosec = divmod(int(total_ns), 1_000_000_000)
+    if not min_sec <= sec <= max_sec:
+        raise InputError(
+            f"cannot make a ROS stamp from {seconds!r}: seconds must be in {min_sec} .. {max_sec}"
+        )
     return sec, nanosec
 
 

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from builtin_interfaces.msg import Time as TimeMsg
 
-from clusterfilter_ros.io.pointcloud2 import seconds_to_stamp, stamp_to_seconds
+from clusterfilter_ros.io.pointcloud2 import MAX_ROS2_SEC, seconds_to_stamp, stamp_to_seconds
 
 
 def seconds_to_time_msg(stamp: float) -> TimeMsg:
     """A ``builtin_interfaces/Time`` for ``stamp`` seconds (nanoseconds rounded)."""
-    sec, nanosec = seconds_to_stamp(stamp)
+    # builtin_interfaces/Time.sec is an int32 (negative stamps are allowed, as before).
+    sec, nanosec = seconds_to_stamp(stamp, MAX_ROS2_SEC, -MAX_ROS2_SEC - 1)
     return TimeMsg(sec=int(sec), nanosec=int(nanosec))
 
 

@@ -66,6 +66,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
         "pickled", lambda f: np.save(f, np.array([{"a": 1}], dtype=object), allow_pickle=True)
     )
     broken_copy("badname", lambda f: shutil.copy(f, f.with_name("hello.npy")))
+    broken_copy("nsname", lambda f: shutil.copy(f, f.with_name("1706255599999223000.npy")))
     shutil.copytree(root / "seq", root / "gtbad")
     np.save(sorted((root / "gtbad" / "ground_truth").iterdir())[2], np.zeros((2, 2)))
     (root / "emptyseq" / "lidar_360").mkdir(parents=True)
@@ -104,6 +105,7 @@ CASES = [
     ("detect-npy-strings", "detect {R}/strings -o {T}/o.csv", "{R}/strings/lidar_360/"),
     ("detect-npy-pickled", "detect {R}/pickled -o {T}/o.csv", "{R}/pickled/lidar_360/"),
     ("detect-npy-bad-name", "detect {R}/badname -o {T}/o.csv", "hello.npy"),
+    ("detect-npy-name-in-ns", "detect {R}/nsname -o {T}/o.csv", "1706255599999223000.npy"),
     ("detect-single-npy", "detect {R}/single.npy -o {T}/o.csv", "{R}/single.npy"),
     ("detect-unknown-file-type", "detect {R}/file.txt -o {T}/o.csv", "{R}/file.txt"),
     ("detect-truncated-rosbag2", "detect {R}/bag2t -o {T}/o.csv", "{R}/bag2t"),

@@ -280,3 +280,15 @@ def test_frames_recorded_out_of_stamp_order_come_out_in_order(tmp_path: Path) ->
     lazy = list(iter_bag_frames(path))
     assert [(f.sensor, f.stamp) for f in lazy] == [(f.sensor, f.stamp) for f in seq.frames]
     assert [len(f) for f in read_bag(path).frames] == [len(f) for f in seq.frames]
+
+
+@pytest.mark.parametrize("fmt, lidar_msg", [("rosbag2", "PointCloud2"), ("rosbag2", "CustomMsg")])
+def test_stamp_beyond_a_ros2_time_is_an_input_error(
+    tmp_path: Path, fmt: str, lidar_msg: str
+) -> None:
+    # ROS 2 builtin_interfaces/Time.sec is an int32: 2**31 s would fail in struct.pack.
+    frame = Frame(2.0**31 + 0.5, MID360, np.ones((2, 3), dtype=np.float32))
+    out = tmp_path / "bag"
+    with pytest.raises(InputError, match=r"cannot make a ROS stamp .*0 \.\. 2147483647"):
+        write_bag(Sequence("s", [frame], None), out, fmt=fmt, lidar_msg=lidar_msg)
+    assert not out.exists()

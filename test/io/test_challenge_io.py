@@ -82,6 +82,11 @@ def test_stamp_parsing() -> None:
     assert parse_stamp(Path("1706255621.npy")) == 1706255621.0
     with pytest.raises(InputError, match="abc.npy"):
         parse_stamp(Path("abc.npy"))
+    assert parse_stamp(Path("0.npy")) == 0.0
+    assert parse_stamp(Path("4294967295.npy")) == 4294967295.0
+    for name in ("1706255599999223000.npy", "4294967296.npy", "1" * 400 + ".npy"):
+        with pytest.raises(InputError, match=r"not a time in seconds up to 4294967295 .*like 17"):
+            parse_stamp(Path(name))
 
 
 def test_nonfinite_and_zero_rows_dropped(tmp_path: Path) -> None:

@@ -202,6 +202,12 @@ def test_malformed_messages(kind: str, match: str) -> None:
 def test_stamp_conversion() -> None:
     assert seconds_to_stamp(1.9999999999) == (2, 0)
     assert seconds_to_stamp(STAMP) == (1706255621, 600227000)
+    assert seconds_to_stamp(4294967295.5) == (4294967295, 500000000)
+    for bad in (-0.5, 4294967296.0, 1706255599999223000.0):
+        with pytest.raises(InputError, match=r"cannot make a ROS stamp .*0 \.\. 4294967295"):
+            seconds_to_stamp(bad)
+    with pytest.raises(InputError, match=r"0 \.\. 2147483647"):
+        seconds_to_stamp(2**31 + 0.5, max_sec=2**31 - 1)
     msg = CloudMessage(Header(Stamp(5, 500_000_000)), 0, 0, [], False, 26, 0, b"")
     with pytest.raises(MalformedCloudError, match="no x/y/z"):
         decode_pointcloud2(msg, AVIA)
