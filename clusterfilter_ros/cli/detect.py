@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -95,6 +96,8 @@ def read_timestamps(path: str) -> dict:
             stamp = float(row[t_col])
         except (ValueError, IndexError):
             raise InputError(f"{p}: line {i}: not a timestamp: {row}") from None
+        if not np.isfinite(stamp):
+            raise InputError(f"{p}: line {i}: timestamp {row[t_col]!r} is not a finite number")
         key = row[s_col].strip() if s_col is not None and s_col < len(row) else None
         out.setdefault(key, []).append(stamp)
     return {k: np.asarray(v, dtype=np.float64) for k, v in out.items()}
@@ -164,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
     from clusterfilter_ros.io.dataset import list_inputs
     from clusterfilter_ros.io.groundtruth import write_positions_csv
 
+    if not math.isfinite(args.max_gap) or args.max_gap <= 0:
+        raise InputError(f"--max-gap must be a positive number, got {args.max_gap}")
     params = detector_params_from_args(args)
     if args.mode == "stream" and params.clustering == "dbscan":
         raise InputError(

@@ -85,6 +85,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (root / "ragged.csv").write_text("timestamp,x,y,z\n100.0,1,2\n")
     (root / "text_value.csv").write_text("timestamp,x,y,z\n100.0,1,2,zz\n")
     (root / "nan_stamp.csv").write_text("timestamp,x,y,z\n100.0,1,2,3\nnan,1,2,3\n")
+    (root / "stamps_inf.txt").write_text("timestamp\n100.0\ninf\n100.2\n")
     (root / "binary.csv").write_bytes(b"\xff\xfe\x00garbage\x00\x01")
     (root / "huge_field.csv").write_text(
         "timestamp,x,y,z\n100.0,1,2,3\n" + "1" * 200_000 + ",1,2,3\n"
@@ -115,6 +116,18 @@ CASES = [
     ("detect-output-is-folder", "detect {R}/seq -o {T}", "cannot write {T}"),
     ("detect-output-under-file", "detect {R}/seq -o {R}/file.txt/o.csv", "{R}/file.txt is a file"),
     ("detect-missing-timestamps", "detect {R}/seq -o {T}/o.csv --timestamps {R}/no.txt", "no.txt"),
+    (
+        "detect-timestamps-inf",
+        "detect {R}/seq -o {T}/o.csv --timestamps {R}/stamps_inf.txt",
+        "{R}/stamps_inf.txt: line 3",
+    ),
+    (
+        "detect-timestamps-nan",
+        "detect {R}/seq -o {T}/o.csv --timestamps {R}/nan_stamp.csv",
+        "{R}/nan_stamp.csv: line 3",
+    ),
+    ("detect-max-gap-nan", "detect {R}/seq -o {T}/o.csv --max-gap nan", "--max-gap"),
+    ("detect-max-gap-negative", "detect {R}/seq -o {T}/o.csv --max-gap -1", "--max-gap"),
     (
         "detect-timestamps-huge-field",
         "detect {R}/seq -o {T}/o.csv --timestamps {R}/huge_field.csv",
