@@ -15,6 +15,7 @@ import glob
 import os
 import shutil
 import sqlite3
+import stat
 import tempfile
 import time
 from collections.abc import Iterator
@@ -81,6 +82,16 @@ def remove_stale_temporaries(target: Path, max_age: float = STALE_SECONDS) -> in
     return removed
 
 
+def _is_special_file(path: Path) -> bool:
+    """True if ``path`` exists and is neither a regular file nor a folder (a character
+    device such as ``/dev/null``, a FIFO, a socket)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
 @contextlib.contextmanager
 def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
     """Yield a temporary file path next to ``path``; on success move it onto ``path``.
@@ -91,14 +102,24 @@ def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterat
     :class:`OSError` while writing or moving (disk full, the target is a folder) becomes
     an :class:`InputError` naming ``path``.
     ``suffix`` is appended to the temporary name (some writers insist on an extension).
+
+    A symbolic link is kept: the file it points to is replaced. An existing target that
+    is not a regular file (``/dev/null``, a FIFO) is not replaced either: the finished
+    temporary (made in the system's temporary folder) is copied into it, non-atomically.
     """
     target = Path(path)
-    _ensure_parent(target)
-    if target.is_dir():
-        raise InputError(f"cannot write {target}: it is a folder")
+    if target.is_symlink():
+        target = Path(os.path.realpath(target))
+    special = _is_special_file(target)
+    if not special:
+        _ensure_parent(target)
+        if target.is_dir():
+            raise InputError(f"cannot write {target}: it is a folder")
     try:
         fd, tmp_name = tempfile.mkstemp(
-            prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent
+            prefix=f".{target.name}.",
+            suffix=f".tmp{suffix}",
+            dir=None if special else target.parent,
         )
         # mkstemp makes the file private (0600); give the result the usual permissions.
         os.fchmod(fd, 0o666 & ~_UMASK)
@@ -109,8 +130,13 @@ def atomic_output_path(path: str | os.PathLike[str], suffix: str = "") -> Iterat
     try:
         try:
             yield tmp
-            os.replace(tmp, target)
-            remove_stale_temporaries(target)
+            if special:
+                with open(tmp, "rb") as src, open(target, "wb") as dst:
+                    shutil.copyfileobj(src, dst)
+                tmp.unlink()
+            else:
+                os.replace(tmp, target)
+                remove_stale_temporaries(target)
         except OSError as exc:  # disk full, quota, target became a folder, ...
             raise _output_error(target, exc) from exc
     except BaseException:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import errno
 import os
 import sqlite3
+import stat
+import threading
 import time
 from pathlib import Path
 
@@ -13,6 +15,7 @@ import pytest
 
 from clusterfilter_ros.core.frame import MID360, Frame
 from clusterfilter_ros.errors import InputError
+from clusterfilter_ros.io import atomic
 from clusterfilter_ros.io.atomic import (
     atomic_output_dir,
     atomic_write_text,
@@ -105,3 +108,42 @@ def test_write_error_while_writing_a_ros2_bag(tmp_path: Path, monkeypatch, stora
     with pytest.raises(InputError, match=f"cannot write {out}: {reason}$"):
         write_bag_frames(_frames(), out, storage=storage)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_output_through_a_symlink_replaces_the_linked_file_and_keeps_the_link(
+    tmp_path: Path,
+) -> None:
+    real = tmp_path / "results" / "estimates.csv"
+    real.parent.mkdir()
+    real.write_text("old\n")
+    link = tmp_path / "latest.csv"
+    link.symlink_to(real)
+    atomic_write_text(link, "new\n")
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert real.read_text() == "new\n"
+    assert sorted(p.name for p in real.parent.iterdir()) == ["estimates.csv"]
+
+
+def test_output_to_a_fifo_is_written_into_it_not_replaced(tmp_path: Path) -> None:
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    received: list[bytes] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    atomic_write_text(fifo, "timestamp,x,y,z\n")
+    reader.join(timeout=10)
+    assert received == [b"timestamp,x,y,z\n"]
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still a FIFO, not a regular file
+    assert [p.name for p in tmp_path.iterdir()] == ["pipe"]  # no temporary left beside it
+
+
+def test_output_to_a_device_like_file_is_copied_into_it(tmp_path: Path, monkeypatch) -> None:
+    # Stand-in for /dev/null (a test must not touch the real one): a file the check
+    # reports as special is written in place, never replaced by os.replace.
+    target = tmp_path / "device"
+    target.write_text("")
+    inode = target.stat().st_ino
+    monkeypatch.setattr(atomic, "_is_special_file", lambda path: path == target)
+    atomic_write_text(target, "data\n")
+    assert target.stat().st_ino == inode and target.read_text() == "data\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["device"]
