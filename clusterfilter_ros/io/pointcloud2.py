@@ -408,7 +408,8 @@ def pack_points(
     if "intensity" in dtype.names and frame.intensity is not None:
         points["intensity"] = frame.intensity
     if "timestamp" in dtype.names:
-        sec, nanosec = seconds_to_stamp(frame.stamp)
+        # A float field: any stamp a ROS 1 or ROS 2 header can hold.
+        sec, nanosec = seconds_to_stamp(frame.stamp, MAX_ROS1_SEC, -MAX_ROS2_SEC - 1)
         stamp_ns = float(sec * 1_000_000_000 + nanosec)
         offsets = 0.0 if frame.point_time is None else np.round(frame.point_time * 1e9)
         points["timestamp"] = stamp_ns + offsets
@@ -490,7 +491,9 @@ def make_pointcloud2(frame: Frame, frame_id: str = "livox_frame", layout: str = 
     from sensor_msgs.msg import PointCloud2, PointField
     from std_msgs.msg import Header as RosHeader
 
-    sec, nanosec = seconds_to_stamp(frame.stamp)
+    # builtin_interfaces/Time.sec is an int32 (negative stamps allowed, as the node's own
+    # conversion in ros/stamps.py): a cloud stamped as its input frame is always valid.
+    sec, nanosec = seconds_to_stamp(frame.stamp, MAX_ROS2_SEC, -MAX_ROS2_SEC - 1)
     header = RosHeader(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
     return frame_to_pointcloud2(frame, PointCloud2, PointField, header, layout)
 
