@@ -7,6 +7,7 @@ and with ``clusterfilter ... --params-file``.
 
 from __future__ import annotations
 
+import difflib
 from pathlib import Path
 from typing import Any
 
@@ -73,8 +74,36 @@ def load_params_file(path: str | Path) -> dict[str, Any]:
     ]
     if nested:
         for block in nested:
-            if isinstance(block, dict):
-                values.update(block)
+            if not isinstance(block, dict):
+                raise InputError(f"params file {path}: ros__parameters must hold a mapping")
+            values.update(block)
     else:
         values.update(data)
+    _check_names(values, path)
     return values
+
+
+#: Parameters every ROS 2 node has, which a params file may set for the node.
+ROS_NODE_PARAMS = ("use_sim_time", "qos_overrides", "start_type_description_service")
+
+
+def _check_names(values: dict[str, Any], path: Path) -> None:
+    """Refuse names no parameter has (a misspelt name would otherwise be ignored and the
+    default used), suggesting the closest known name."""
+    known = [s.name for s in all_param_specs()] + list(ROS_NODE_PARAMS)
+    unknown = [str(k) for k in values if k not in known]
+    if not unknown:
+        return
+    parts = []
+    for name in unknown:
+        close = difflib.get_close_matches(name, known, n=1)
+        if close:
+            parts.append(f"{name} (did you mean {close[0]}?)")
+        elif isinstance(values[name], dict):
+            parts.append(f"{name} (a node's block needs a ros__parameters: mapping)")
+        else:
+            parts.append(name)
+    raise InputError(
+        f"params file {path}: unknown parameter{'s' if len(parts) > 1 else ''} "
+        f"{', '.join(parts)}; `clusterfilter params --markdown` lists them"
+    )

@@ -84,3 +84,29 @@ def test_params_file_errors_are_one_line(tmp_path):
     bad.write_text("a: [1, 2\n")
     with pytest.raises(InputError, match="not readable YAML"):
         load_params_file(bad)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("epss: 1.0\n", r"unknown parameter epss \(did you mean eps\?\)"),
+        ("/**:\n  ros__parameters:\n    min_cluster_point: 5\n", "min_cluster_points"),
+        ("/**:\n  ros_parameters:\n    eps: 1.0\n", "needs a ros__parameters: mapping"),
+        ("/**:\n  ros__parameters: [eps, 1.0]\n", "ros__parameters must hold a mapping"),
+        ("eps: 1.0\nfoo: 1\nbar: 2\n", "unknown parameters foo, bar"),
+    ],
+)
+def test_a_misspelt_or_misplaced_parameter_is_refused_not_ignored(tmp_path, text, message):
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    with pytest.raises(InputError, match=message):
+        load_params_file(path)
+
+
+def test_node_and_standard_ros_parameters_are_accepted(tmp_path):
+    path = tmp_path / "params.yaml"
+    path.write_text(
+        "detector:\n  ros__parameters:\n    eps: 1.5\n    avia_topic: /livox/avia\n"
+        "    use_sim_time: true\n"
+    )
+    assert load_params_file(path) == {"eps": 1.5, "avia_topic": "/livox/avia", "use_sim_time": True}

@@ -13,7 +13,7 @@ def add_detector_options(parser: argparse.ArgumentParser) -> None:
         "--params-file",
         metavar="YAML",
         help="detector parameters (ROS params YAML such as config/detector.yaml, or a flat "
-        "mapping); node-only parameters in it are ignored",
+        "mapping); node-only parameters in it are ignored, unknown names are an error",
     )
     parser.add_argument(
         "--param",
