@@ -12,6 +12,7 @@ print one line and exit with code 2; ``--debug`` shows the traceback instead.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import pkgutil
 import signal
@@ -74,7 +75,18 @@ def _interrupted(command: str) -> int:
     return 130
 
 
+def _printable_output() -> None:
+    """Let stdout and stderr print any file name: bytes that are not valid in their
+    encoding (a folder name that is not UTF-8) become escapes instead of an error."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors="backslashreplace")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    _printable_output()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -189,17 +189,26 @@ def run(args: argparse.Namespace) -> int:
         write_positions_csv(args.output, est)
         print(f"{len(est)} estimates -> {args.output}", file=sys.stderr)
         return 0
-    lines = ["Sequence,Timestamp,Position,Classification"]
+    import csv
+    import io
+
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["Sequence", "Timestamp", "Position", "Classification"])
     total = 0
     for path in inputs:
-        stamps = _stamps_for(stamps_by_seq, path)
+        try:
+            stamps = _stamps_for(stamps_by_seq, path)
+        except InputError as exc:  # a sequence the timestamps file does not ask for
+            print(f"clusterfilter detect: warning: {exc}; skipped", file=sys.stderr)
+            continue
         est = detect_one(path, args.mode, params, stamps, args.max_gap, progress, select)
-        name = _sequence_name(path)
+        name = _printable(_sequence_name(path))
         for t, p in zip(est.stamps, est.xyz, strict=True):
             x, y, z = (float(v) for v in p)
-            lines.append(f'{name},{float(t)!r},"[{x!r}, {y!r}, {z!r}]",{UG2_CLASSIFICATION}')
+            writer.writerow([name, repr(float(t)), f"[{x!r}, {y!r}, {z!r}]", UG2_CLASSIFICATION])
         total += len(est)
-    atomic_write_text(args.output, "\n".join(lines) + "\n")
+    atomic_write_text(args.output, buffer.getvalue())
     print(f"{total} estimates from {len(inputs)} sequence(s) -> {args.output}", file=sys.stderr)
     return 0
 
@@ -211,10 +220,15 @@ def _sequence_name(path: Path) -> str:
     return name
 
 
-def _stamps_for(stamps_by_seq, path: Path):
-    """The requested stamps for one recording (None: every frame stamp)."""
-    import numpy as np
+def _printable(name: str) -> str:
+    """``name`` as UTF-8 text: bytes of a file name that are not UTF-8 (kept by Python
+    as surrogates) become ``\\xNN`` escapes."""
+    return name.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
 
+
+def _stamps_for(stamps_by_seq, path: Path):
+    """The requested stamps for one recording (None: every frame stamp); InputError if a
+    timestamps file with a sequence column has no rows for it."""
     if stamps_by_seq is None:
         return None
     name = _sequence_name(path)
@@ -224,4 +238,10 @@ def _stamps_for(stamps_by_seq, path: Path):
         return stamps_by_seq[None]
     if len(stamps_by_seq) == 1:
         return next(iter(stamps_by_seq.values()))
-    return np.empty(0)
+    from clusterfilter_ros.errors import InputError
+
+    named = ", ".join(sorted(_printable(str(k)) for k in stamps_by_seq))
+    raise InputError(
+        f"--timestamps names no sequence {_printable(name)!r} (it names {named}); "
+        "its sequence column must hold the sequence folder or bag names"
+    )

@@ -71,6 +71,49 @@ def test_ug2_format_over_a_folder_of_sequences(recordings, tmp_path):
     assert len(xyz) == 3
 
 
+def test_ug2_rows_are_csv_for_any_sequence_name(recordings, tmp_path):
+    # A folder name with a comma and one that is not UTF-8: each row still has four
+    # fields, and the undecodable byte is written as an escape, not an error.
+    import csv
+    import os
+    import shutil
+
+    root = tmp_path / "root"
+    root.mkdir()
+    shutil.copytree(recordings / "mmaud" / "flight", root / "seq,1")
+    odd = os.fsdecode(b"seq\xff")
+    shutil.copytree(recordings / "mmaud" / "flight", root / odd)
+    out = tmp_path / "results.csv"
+    assert main(["detect", str(root), "--format", "ug2", "-o", str(out), "--quiet"]) == 0
+    rows = list(csv.reader(out.read_text(encoding="utf-8").splitlines()))
+    assert rows[0] == ["Sequence", "Timestamp", "Position", "Classification"]
+    assert {len(r) for r in rows} == {4}
+    assert {r[0] for r in rows[1:]} == {"seq,1", "seq\\xff"}
+    # Printed to a strict UTF-8 stdout, the odd name is escaped, not an error.
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONIOENCODING": "utf-8"}
+    cmd = [sys.executable, "-m", "clusterfilter_ros.cli", "info", str(root)]
+    done = subprocess.run(cmd, capture_output=True, env=env, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr.decode(errors="replace")
+    assert b"seq\\udcff" in done.stdout
+
+
+def test_ug2_skips_a_sequence_the_timestamps_file_does_not_name(recordings, tmp_path, capsys):
+    stamps = tmp_path / "stamps.csv"
+    stamps.write_text("sequence,timestamp\nflight,1006.5\nother,1.0\n")
+    out = tmp_path / "results.csv"
+    args = ["detect", str(recordings / "mmaud"), "--format", "ug2", "-o", str(out), "--quiet"]
+    assert main([*args, "--timestamps", str(stamps)]) == 0
+    assert "no sequence 'empty'" in capsys.readouterr().err  # warned and skipped
+    assert out.read_text().splitlines()[1].startswith("flight,1006.5,")
+    # One sequence in csv format whose name the file lacks: an error, not an empty file.
+    single = ["detect", str(recordings / "mmaud" / "empty"), "-o", str(tmp_path / "x.csv")]
+    assert main([*single, "--quiet", "--timestamps", str(stamps)]) == 2
+    assert "names no sequence 'empty'" in capsys.readouterr().err
+
+
 def test_timestamps_and_params(recordings, tmp_path):
     stamps = tmp_path / "stamps.csv"
     stamps.write_text("timestamp\n1001.0\n1006.5\n1050.0\n")
