@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from clusterfilter_ros.core.frame import SENSORS
 from clusterfilter_ros.errors import InputError
 
 
@@ -41,6 +42,9 @@ def parse_topic_mapping(values: list[str]) -> dict[str, str] | None:
         topic, sep, sensor = value.partition("=")
         if not sep or not topic.strip() or not sensor.strip():
             raise InputError(f"--topic {value!r}: expected TOPIC=SENSOR, e.g. /livox/lidar=avia")
+        if sensor.strip() not in SENSORS:
+            # An unknown sensor name would skip that lidar's own filters without a word.
+            raise InputError(f"--topic {value!r}: the sensor must be one of {', '.join(SENSORS)}")
         mapping[topic.strip()] = sensor.strip()
     return mapping or None
 

@@ -604,6 +604,14 @@ def write_bag_frames(
     if lidar_msg not in ("PointCloud2", "CustomMsg"):
         raise InputError(f"unknown lidar message {lidar_msg!r}; choose PointCloud2 or CustomMsg")
     topic_of = dict(DEFAULT_TOPICS if topics is None else topics)
+    for sensor, topic in topic_of.items():
+        if not isinstance(topic, str) or not topic.strip():
+            raise InputError(f"the {sensor} topic name is empty")
+    if len(set(topic_of.values())) < len(topic_of):
+        # Both lidars on one topic could not be told apart when the bag is read.
+        raise InputError(f"two lidars share one topic: {topic_of}")
+    if ground_truth_topic is not None and not ground_truth_topic.strip():
+        raise InputError("the ground-truth topic name is empty")
     if ground_truth_topic and ground_truth_topic in topic_of.values():
         raise InputError(f"ground-truth topic {ground_truth_topic} is also a lidar topic")
     messages = _messages(frames, ground_truth, topic_of, ground_truth_topic)

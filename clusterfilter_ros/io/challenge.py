@@ -151,6 +151,11 @@ def _require_sequence_folder(path: str | os.PathLike[str]) -> Path:
         raise InputError(
             f"{p}: no lidar_360/ or livox_avia/ folder inside (not a challenge sequence)"
         )
+    for name in (*SENSOR_FOLDERS, GROUND_TRUTH_FOLDER):
+        # A file where a folder belongs would otherwise be skipped without a word.
+        entry = p / name
+        if entry.exists() and not entry.is_dir():
+            raise InputError(f"{entry}: not a folder (it should hold <stamp>.npy files)")
     return p
 
 
@@ -162,8 +167,13 @@ def _npy_files(folder: Path) -> list[Path]:
     files = []
     for e in entries:
         try:
-            if e.name.endswith(".npy") and e.is_file():
+            if not e.name.endswith(".npy"):
+                continue
+            if e.is_file():
                 files.append(Path(e.path))
+            elif e.is_symlink() and not os.path.exists(e.path):
+                # A frame whose file is gone would otherwise be skipped without a word.
+                raise InputError(f"{e.path}: broken symbolic link (its file is missing)")
         except OSError as exc:  # a symlink loop, ...
             raise access_error(e.path, exc) from exc
     return files

@@ -212,6 +212,8 @@ def read_input_ground_truth(
         open_input(p)  # raises the "pass one of them" error
     if kind == "mmaud":
         gt_dir = p / challenge.GROUND_TRUTH_FOLDER
+        if gt_dir.exists() and not gt_dir.is_dir():
+            raise InputError(f"{gt_dir}: not a folder (it should hold <stamp>.npy files)")
         return challenge.read_ground_truth_folder(gt_dir) if gt_dir.is_dir() else None
     from clusterfilter_ros.io import bags
 

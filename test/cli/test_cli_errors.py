@@ -150,6 +150,7 @@ CASES = [
     ("detect-bad-topic-syntax", "detect {R}/b1.bag -o {T}/o.csv --topic nope", "nope"),
     ("detect-topic-on-folder", "detect {R}/seq -o {T}/o.csv --topic /a=avia", "{R}/seq"),
     ("detect-unknown-sensor", "detect {R}/seq -o {T}/o.csv --sensors lidarX", "lidarX"),
+    ("detect-topic-unknown-sensor", "detect {R}/bag2 -o {T}/o.csv --topic /a=lidarX", "lidarX"),
     # evaluate
     ("evaluate-missing-pred", "evaluate {R}/nope.csv {R}/seq", "{R}/nope.csv"),
     ("evaluate-pred-header", "evaluate {R}/wrong_header.csv {R}/seq", "{R}/wrong_header.csv"),

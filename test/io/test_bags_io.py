@@ -112,6 +112,25 @@ def test_custom_topics_and_mapping(tmp_path: Path) -> None:
     np.testing.assert_array_equal(gt.xyz, seq.ground_truth.xyz)
 
 
+@pytest.mark.parametrize("fmt", ["rosbag2", "rosbag1"])
+@pytest.mark.parametrize(
+    ("topics", "gt_topic", "message"),
+    [
+        ({AVIA: "/x", MID360: "/x"}, None, "two lidars share one topic"),
+        ({AVIA: "", MID360: "/m"}, None, "the avia topic name is empty"),
+        ({AVIA: "/a", MID360: "/m"}, " ", "the ground-truth topic name is empty"),
+        ({AVIA: "/a", MID360: "/m"}, "/a", "is also a lidar topic"),
+    ],
+)
+def test_topics_a_written_bag_could_not_be_read_back_by_are_refused(
+    tmp_path: Path, fmt: str, topics, gt_topic, message
+) -> None:
+    out = tmp_path / ("b.bag" if fmt == "rosbag1" else "b")
+    with pytest.raises(InputError, match=message):
+        write_bag(_sequence(2), out, fmt=fmt, topics=topics, ground_truth_topic=gt_topic)
+    assert not out.exists()
+
+
 def test_unknown_topic_lists_topics(tmp_path: Path) -> None:
     write_bag(_sequence(2), tmp_path / "b")
     with pytest.raises(InputError, match=r"no topic /nope; the bag has: .*/livox/avia") as info:

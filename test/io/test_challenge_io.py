@@ -171,6 +171,9 @@ def test_root_of_sequences(tmp_path: Path) -> None:
         ("shape", "2.5.npy"),
         ("name", "frame_a.npy"),
         ("gt_shape", "3.5.npy"),
+        ("gt_file", "ground_truth: not a folder"),
+        ("avia_file", "livox_avia: not a folder"),
+        ("broken_link", "4.5.npy: broken symbolic link"),
     ],
 )
 def test_errors_name_the_culprit(tmp_path: Path, setup: str, culprit: str) -> None:
@@ -189,6 +192,12 @@ def test_errors_name_the_culprit(tmp_path: Path, setup: str, culprit: str) -> No
         _write_raw(seq_dir / "lidar_360", "frame_a.npy", np.ones((3, 3)))
     elif setup == "gt_shape":
         _write_raw(seq_dir / "ground_truth", "3.5.npy", np.ones(4))
+    elif setup == "gt_file":  # a file where a folder belongs is not skipped silently
+        (seq_dir / "ground_truth").write_text("x")
+    elif setup == "avia_file":
+        (seq_dir / "livox_avia").write_text("x")
+    elif setup == "broken_link":  # a frame whose file is gone is not skipped silently
+        (seq_dir / "lidar_360" / "4.5.npy").symlink_to(tmp_path / "gone.npy")
     with pytest.raises(InputError) as info:
         open_input(seq_dir)
     message = str(info.value)
