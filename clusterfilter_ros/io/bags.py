@@ -620,6 +620,9 @@ def write_bag_frames(
     if fmt == "rosbag1":
         from rosbags.rosbag1 import Writer as Ros1Writer
 
+        if target.suffix.lower() != ".bag":
+            # Readers (ours, rosbag, ros2 bag) recognise a ROS 1 bag by its extension.
+            raise InputError(f"output {target}: a ROS 1 bag's name must end in .bag")
         if target.exists() and not overwrite:
             raise InputError(f"output {target} already exists (choose another path or remove it)")
         with atomic_output_path(target, suffix=".bag") as tmp:

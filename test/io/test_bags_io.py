@@ -131,6 +131,14 @@ def test_topics_a_written_bag_could_not_be_read_back_by_are_refused(
     assert not out.exists()
 
 
+def test_a_ros1_bag_name_must_end_in_bag(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="must end in .bag"):
+        write_bag(_sequence(2), tmp_path / "out", fmt="rosbag1")
+    assert not (tmp_path / "out").exists()
+    write_bag(_sequence(2), tmp_path / "out.BAG", fmt="rosbag1")
+    assert detect_input_kind(tmp_path / "out.BAG") == "rosbag1"
+
+
 def test_unknown_topic_lists_topics(tmp_path: Path) -> None:
     write_bag(_sequence(2), tmp_path / "b")
     with pytest.raises(InputError, match=r"no topic /nope; the bag has: .*/livox/avia") as info:
