@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from collections.abc import Sequence as SequenceABC
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -196,21 +197,23 @@ def list_lidar_files(
 
 
 def load_npy(path: Path) -> np.ndarray:
-    """``np.load`` with every failure turned into a one-line :class:`InputError`."""
+    """Read one ``.npy`` array (no pickles) with every failure turned into a one-line
+    :class:`InputError`; the file is opened once."""
     try:
         with open(path, "rb") as fh:
             magic = fh.read(len(_NPY_MAGIC))
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    if magic != _NPY_MAGIC:
-        what = "empty file" if not magic else "no .npy header"
-        raise InputError(f"{path}: not a .npy file ({what}; corrupt or wrongly named?)")
-    _check_npy_size(path)
-    try:
-        arr = np.load(path, allow_pickle=False)
+            if magic != _NPY_MAGIC:
+                what = "empty file" if not magic else "no .npy header"
+                raise InputError(f"{path}: not a .npy file ({what}; corrupt or wrongly named?)")
+            fh.seek(0)
+            _check_npy_size(fh, path)
+            fh.seek(0)
+            arr = np.lib.format.read_array(fh, allow_pickle=False)
     except MemoryError as exc:  # last resort: a header that _check_npy_size let through
         raise InputError(f"{path}: array too large to load into memory") from exc
     except (OSError, ValueError, EOFError) as exc:
+        if isinstance(exc, OSError) and exc.strerror:
+            raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise InputError(f"{path}: not a readable .npy file ({msg})") from exc
     if not isinstance(arr, np.ndarray):
@@ -218,28 +221,28 @@ def load_npy(path: Path) -> np.ndarray:
     return arr
 
 
-def _check_npy_size(path: Path) -> None:
-    """Refuse a .npy file shorter than the array its header describes.
+def _check_npy_size(fh: BinaryIO, path: Path) -> None:
+    """Refuse a .npy file shorter than the array its header describes (``fh`` at the
+    file's start; left anywhere).
 
-    A corrupt header claiming a huge shape would otherwise make ``np.load`` try to
+    A corrupt header claiming a huge shape would otherwise make the reader try to
     allocate it (``MemoryError``) before noticing the file is too short. Headers this
-    function cannot parse are left for ``np.load`` to report.
+    function cannot parse are left for the reader to report.
     """
     readers = {
         (1, 0): np.lib.format.read_array_header_1_0,
         (2, 0): np.lib.format.read_array_header_2_0,
     }
     try:
-        with open(path, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            if version not in readers:
-                return
-            shape, _, dtype = readers[version](fh)
-            data_bytes = os.fstat(fh.fileno()).st_size - fh.tell()
+        version = np.lib.format.read_magic(fh)
+        if version not in readers:
+            return
+        shape, _, dtype = readers[version](fh)
+        data_bytes = os.fstat(fh.fileno()).st_size - fh.tell()
     except (OSError, ValueError, EOFError, SyntaxError, TypeError):
-        return  # np.load reports these with its own message
+        return  # the reader reports these with its own message
     if dtype.hasobject:
-        return  # np.load refuses pickled arrays
+        return  # the reader refuses pickled arrays
     count = 1
     for n in shape:
         count *= int(n)

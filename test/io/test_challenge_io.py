@@ -274,6 +274,6 @@ def test_memory_error_while_loading_an_npy_is_an_input_error(tmp_path: Path, mon
     def no_memory(*args: object, **kwargs: object) -> np.ndarray:
         raise MemoryError("Unable to allocate 224. GiB")
 
-    monkeypatch.setattr(np, "load", no_memory)
+    monkeypatch.setattr(np.lib.format, "read_array", no_memory)
     with pytest.raises(InputError, match=r"1\.0\.npy: array too large to load into memory"):
         read_sequence_folder(tmp_path / "s")
