@@ -144,6 +144,19 @@ def bag_ros_version(path: str | os.PathLike[str]) -> int:
     raise InputError(f"{p}: not a bag (expected a .bag file, a ROS 2 bag folder, .db3 or .mcap)")
 
 
+def _permission_denied(exc: BaseException) -> bool:
+    """True if ``exc`` or an exception it was raised from is a PermissionError (rosbags
+    wraps the OS error in its own)."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, PermissionError):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False
+
+
 class _OpenBag:
     """A rosbags reader opened with errors turned into :class:`InputError`."""
 
@@ -164,6 +177,8 @@ class _OpenBag:
                 self.reader = Ros2Reader(self._ros2_storage_path())
             self.reader.open()
         except self.errors as exc:
+            if _permission_denied(exc):
+                raise InputError(f"{self.path}: cannot read bag (permission denied)") from exc
             raise InputError(
                 f"{self.path}: cannot read bag, truncated or corrupt? ({_one_line(exc)})"
             ) from exc

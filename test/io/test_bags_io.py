@@ -139,6 +139,27 @@ def test_a_ros1_bag_name_must_end_in_bag(tmp_path: Path) -> None:
     assert detect_input_kind(tmp_path / "out.BAG") == "rosbag1"
 
 
+@pytest.mark.parametrize("fmt", ["rosbag2", "rosbag1"])
+def test_an_unreadable_bag_is_not_called_corrupt(tmp_path: Path, monkeypatch, fmt: str) -> None:
+    # Run as root in CI, chmod cannot make a file unreadable: the reader's open fails as
+    # rosbags does for a user without read permission (directly, or wrapped in its own).
+    from rosbags.rosbag1 import Reader as Ros1Reader
+    from rosbags.rosbag2 import Reader as Ros2Reader
+
+    path = tmp_path / ("b.bag" if fmt == "rosbag1" else "b")
+    write_bag(_sequence(2), path, fmt=fmt)
+
+    def denied(self) -> None:
+        try:
+            raise PermissionError(13, "Permission denied", str(path))
+        except PermissionError as exc:
+            raise RuntimeError("could not open the bag") from exc
+
+    monkeypatch.setattr(Ros1Reader if fmt == "rosbag1" else Ros2Reader, "open", denied)
+    with pytest.raises(InputError, match=r"cannot read bag \(permission denied\)"):
+        read_bag(path)
+
+
 def test_unknown_topic_lists_topics(tmp_path: Path) -> None:
     write_bag(_sequence(2), tmp_path / "b")
     with pytest.raises(InputError, match=r"no topic /nope; the bag has: .*/livox/avia") as info:
