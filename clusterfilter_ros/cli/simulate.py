@@ -6,6 +6,7 @@ Frames are rendered and written one at a time, so any duration fits in memory.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -88,10 +89,17 @@ def run(args: argparse.Namespace) -> int:
         if extra and not Path(extra).suffix.lower() == suffix:
             raise InputError(f"{extra}: expected a {suffix} file name")
         if extra:
+            # Checked before the main output is written, so that a bad extra path does
+            # not stop the command half-way with the sequence already on disk.
+            parent = Path(extra).resolve().parent
             try:
-                Path(extra).resolve().parent.mkdir(parents=True, exist_ok=True)
+                parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
                 raise InputError(f"{extra}: cannot create its folder ({exc.strerror})") from None
+            if Path(extra).is_dir():
+                raise InputError(f"cannot write {extra}: it is a folder")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise InputError(f"cannot write {extra}: {parent} is not writable")
     sim = Simulation(
         args.scenario,
         seed=args.seed,

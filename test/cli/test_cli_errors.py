@@ -50,6 +50,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     write_output(seq, root / "bagm", "rosbag2", storage="mcap")
     write_output(seq, root / "custom.bag", "rosbag1", lidar_msg="CustomMsg")
     (root / "empty").mkdir()
+    (root / "dir.npz").mkdir()
     (root / "file.txt").write_text("not a folder\n")
 
     def broken_copy(name: str, damage) -> None:
@@ -258,6 +259,18 @@ def test_error_is_one_line_naming_the_culprit(
     assert culprit.format(**fill) in lines[0]
     assert "Traceback" not in err + out
     assert not list(tmp_path.glob(".*tmp*")), "temporary files left behind"
+
+
+def test_simulate_checks_its_extra_outputs_before_writing_the_sequence(
+    files: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "sim"
+    code, _, err = _run_in_process(
+        ["simulate", str(out), "--duration", "0.3", "--truth", str(files / "dir.npz"), "--quiet"]
+    )
+    assert code == 2
+    assert f"cannot write {files / 'dir.npz'}: it is a folder" in err
+    assert not out.exists()  # nothing half-done: the sequence was not written either
 
 
 @pytest.mark.parametrize("bag", ["b1.bag", "bag2", "bagm", "custom.bag"])
