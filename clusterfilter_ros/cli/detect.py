@@ -123,6 +123,8 @@ def detect_one(
     from clusterfilter_ros.io.dataset import iter_input_frames, require_frames
 
     frames = require_frames(iter_input_frames(input_path, **(select or {})), input_path)
+    order = _OrderCount(frames)
+    frames = iter(order)
     if progress:
         from tqdm import tqdm
 
@@ -134,6 +136,13 @@ def detect_one(
     from clusterfilter_ros.core.streaming import run_streaming
 
     est = run_streaming(frames, params)
+    if order.late:
+        print(
+            f"clusterfilter detect: warning: {input_path}: {order.late} frame(s) came more than "
+            f"{_LATE_SECONDS:g} s behind the newest stamp; the stream mode takes frames in the "
+            "order they are stored (the offline mode does not depend on it)",
+            file=sys.stderr,
+        )
     result = TimedPositions(
         np.array([e.stamp for e in est], dtype=np.float64),
         np.array([e.position for e in est], dtype=np.float64).reshape(-1, 3),
@@ -211,6 +220,27 @@ def run(args: argparse.Namespace) -> int:
     atomic_write_text(args.output, buffer.getvalue())
     print(f"{total} estimates from {len(inputs)} sequence(s) -> {args.output}", file=sys.stderr)
     return 0
+
+
+#: A frame this many seconds older than the newest one read before it is counted late.
+_LATE_SECONDS = 1.0
+
+
+class _OrderCount:
+    """Pass frames through, counting those more than :data:`_LATE_SECONDS` older than
+    the newest stamp before them (a bag recorded with a lagging clock, say)."""
+
+    def __init__(self, frames) -> None:
+        self.frames = frames
+        self.late = 0
+
+    def __iter__(self):
+        newest = -math.inf
+        for frame in self.frames:
+            if frame.stamp < newest - _LATE_SECONDS:
+                self.late += 1
+            newest = max(newest, frame.stamp)
+            yield frame
 
 
 def _sequence_name(path: Path) -> str:

@@ -114,6 +114,29 @@ def test_ug2_skips_a_sequence_the_timestamps_file_does_not_name(recordings, tmp_
     assert "names no sequence 'empty'" in capsys.readouterr().err
 
 
+def test_stream_mode_warns_of_frames_stored_out_of_order(recordings, tmp_path, monkeypatch, capsys):
+    # A bag whose messages were logged in another order than their header stamps (a
+    # lagging clock): the stream mode takes them as stored, and says so.
+    from clusterfilter_ros.io import dataset
+
+    real = dataset.iter_input_frames
+
+    def shuffled(*args, **kwargs):
+        frames = list(real(*args, **kwargs))
+        frames[10], frames[40] = frames[40], frames[10]  # 40 is ~3 s after 10
+        return iter(frames)
+
+    monkeypatch.setattr(dataset, "iter_input_frames", shuffled)
+    out = tmp_path / "o.csv"
+    args = ["detect", str(recordings / "bag2"), "-o", str(out), "--quiet", "--mode", "stream"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "frame(s) came more than 1 s behind the newest stamp" in err
+    assert err.count("warning") == 1
+    assert main([*args[:-2], "--mode", "offline"]) == 0
+    assert "behind the newest" not in capsys.readouterr().err
+
+
 def test_timestamps_and_params(recordings, tmp_path):
     stamps = tmp_path / "stamps.csv"
     stamps.write_text("timestamp\n1001.0\n1006.5\n1050.0\n")
