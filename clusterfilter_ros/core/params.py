@@ -727,9 +727,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "iou_floor",
         "float",
         0.01,
-        "IoU values are clamped to at least this before log(1/IoU) (log(1/0) is infinite).",
+        "IoU values are clamped to at least this before log(1/IoU) (log(1/0) is infinite); "
+        "below 1, since the normalized score divides by log(1/iou_floor).",
         minimum=1e-6,
-        maximum=1.0,
+        maximum=0.99,
     ),
     ParamSpec(
         "coherence_window",
@@ -762,7 +763,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "float",
         1.0,
         "Normalized scoring: apparent speed (m/s; cluster size over its time span) at "
-        "which a cluster gets full confidence; slower scales it down.",
+        "which a cluster gets full confidence; slower scales it down (0: no scaling).",
         minimum=0.0,
         maximum=100.0,
     ),

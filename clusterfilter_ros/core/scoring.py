@@ -347,7 +347,10 @@ def score_clusters(
         coherent = np.clip((res.coherence - lo) / (float(params.min_coherence) - lo), 0.0, 1.0)
         span = np.maximum(res.t_last - res.t_first, fp)
         res.apparent_speed = np.where(counts > 0, res.extent / span, 0.0)
-        moving = np.clip(res.apparent_speed / float(params.min_speed), 0.0, 1.0)
+        if params.min_speed > 0:
+            moving = np.clip(res.apparent_speed / float(params.min_speed), 0.0, 1.0)
+        else:  # min_speed 0: every cluster counts as moving (0 / 0 would be NaN)
+            moving = np.ones(k)
         if params.min_travel > 0:
             moving = np.maximum(moving, np.clip(res.extent / float(params.min_travel), 0.0, 1.0))
         motion = coherent * moving

@@ -42,6 +42,26 @@ def test_relative_density_and_iou_separate_static_from_moving():
     assert select_clusters(s, params) == [1]
 
 
+def test_min_speed_zero_scores_every_cluster_as_moving_without_nan():
+    # 0 is in min_speed's range: the speed factor is then 1, never 0 / 0 = NaN.
+    xyz, t, lab = wall_and_blob()
+    base = {"max_cluster_points": 10**7}
+    with np.errstate(all="raise"):
+        s = score_clusters(lab, xyz, t, detector_params({**base, "min_speed": 0.0}), n_clusters=2)
+    assert np.isfinite(s.confidence).all()
+    ref = score_clusters(lab, xyz, t, detector_params(base), n_clusters=2)
+    assert s.confidence[1] == pytest.approx(ref.confidence[1])  # the blob was at full speed
+
+
+def test_iou_floor_must_stay_below_one():
+    # The normalized score divides by log(1 / iou_floor).
+    from clusterfilter_ros.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="iou_floor"):
+        detector_params({"iou_floor": 1.0})
+    assert detector_params({"iou_floor": 0.99}).iou_floor == 0.99
+
+
 def test_smoothness_is_measured_only_where_a_score_is_left():
     # With the extent gates opened, the static wall is a candidate, but without coherent
     # motion its score is 0 before the residual and acceleration factors (which only
