@@ -104,7 +104,14 @@ def interpolate_predictions(
     ok &= (stamps - ps[lc] <= max_gap) & (ps[rc] - stamps <= max_gap)
     span = ps[rc] - ps[lc]
     frac = np.where(span > 0, (stamps - ps[lc]) / np.where(span > 0, span, 1.0), 0.0)
-    interp = px[lc] + frac[:, None] * (px[rc] - px[lc])
+    with np.errstate(over="ignore", invalid="ignore"):
+        interp = px[lc] + frac[:, None] * (px[rc] - px[lc])
+        bad = ~np.isfinite(interp)
+        if bad.any():
+            # Positions so large (~1e308 m) that their difference overflows: the other
+            # form of the same interpolation stays finite.
+            f = frac[:, None]
+            interp = np.where(bad, px[lc] * (1.0 - f) + px[rc] * f, interp)
     out[ok] = interp[ok]
     return out
 
@@ -135,6 +142,21 @@ def evaluate(
     ``reacquire_gap``: seconds without an observable sample after which the drone's
     next observable sample starts a new appearance (acquisition metrics).
     """
+    # Absurd but finite positions (~1e308 m) give infinite errors, reported as such,
+    # without numpy's overflow warnings.
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _evaluate(pred, gt, max_gap, hit_radius, observable, duration, reacquire_gap)
+
+
+def _evaluate(
+    pred: TimedPositions,
+    gt: TimedPositions,
+    max_gap: float,
+    hit_radius: float,
+    observable: np.ndarray | None,
+    duration: float | None,
+    reacquire_gap: float,
+) -> EvaluationResult:
     n_gt = len(gt)
     matched = interpolate_predictions(pred, gt.stamps, max_gap)
     has = np.isfinite(matched).all(axis=1)

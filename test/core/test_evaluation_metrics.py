@@ -119,3 +119,21 @@ def test_acquisition_in_evaluate_uses_the_observable_samples():
     assert d["mean_acquisition_delay"] == pytest.approx(1.5)
     quiet = evaluate(tp(np.empty(0), np.empty((0, 3))), gt, observable=obs).as_dict()
     assert quiet["n_acquired"] == 0 and quiet["mean_acquisition_delay"] is None
+
+
+def test_absurd_but_finite_positions_give_infinite_errors_without_warnings():
+    import warnings
+
+    t = np.arange(0.0, 1.0, 0.1)
+    gt = TimedPositions(t[:-1] + 0.05, np.zeros((t.size - 1, 3)))  # between predictions
+    xyz = np.full((t.size, 3), 1e308)
+    xyz[::2] *= -1  # neighbours 2e308 apart: their difference overflows
+    pred = TimedPositions(t, xyz)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        matched = interpolate_predictions(pred, gt.stamps, 0.3)
+        res = evaluate(pred, gt)
+    # Halfway between +1e308 and -1e308: about 0 (to rounding), not inf or NaN.
+    assert np.isfinite(matched).all() and np.abs(matched).max() < 1e300
+    assert res.rmse == np.inf  # reported as infinite, not NaN, and without a warning
+    assert res.false_alarm_seconds > 0
