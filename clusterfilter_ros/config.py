@@ -15,7 +15,7 @@ import yaml
 
 from clusterfilter_ros.core.params import DETECTOR_PARAMS, ParamSpec
 from clusterfilter_ros.errors import InputError
-from clusterfilter_ros.ros.node_params import NODE_PARAMS
+from clusterfilter_ros.ros.node_params import NODE_NAME, NODE_PARAMS
 
 
 def all_param_specs() -> list[ParamSpec]:
@@ -53,7 +53,12 @@ def detector_yaml() -> str:
 
 
 def load_params_file(path: str | Path) -> dict[str, Any]:
-    """Read parameter values from a ROS params YAML (any node key) or a flat mapping."""
+    """Read parameter values from a ROS params YAML (any node key) or a flat mapping.
+
+    A name no parameter has is an :class:`InputError` in a flat mapping and in this
+    node's block of a ROS file (``/**``, a key ending in the node's name, or a block
+    most of whose names are this node's); other nodes' blocks are not checked.
+    """
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
@@ -67,19 +72,29 @@ def load_params_file(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise InputError(f"params file {path} must hold a mapping")
     values: dict[str, Any] = {}
-    nested = [
-        v["ros__parameters"]
-        for v in data.values()
-        if isinstance(v, dict) and "ros__parameters" in v
-    ]
+    nested = any(isinstance(v, dict) and "ros__parameters" in v for v in data.values())
+    known = set(_known_names())
     if nested:
-        for block in nested:
+        for node, params in data.items():
+            if not (isinstance(params, dict) and "ros__parameters" in params):
+                continue
+            block = params["ros__parameters"]
             if not isinstance(block, dict):
                 raise InputError(f"params file {path}: ros__parameters must hold a mapping")
+            names = [k for k in block if k in known]
+            if (
+                node == "/**"
+                or str(node).rsplit("/", 1)[-1] == NODE_NAME
+                or (len(names) * 2 > len(block))
+            ):
+                # This node's block (by its name, or mostly its parameters): a name it
+                # does not know is a misspelling. Another node's, in a file shared by
+                # several, is left alone.
+                _check_names(block, path)
             values.update(block)
     else:
+        _check_names(data, path)
         values.update(data)
-    _check_names(values, path)
     return values
 
 
@@ -87,10 +102,14 @@ def load_params_file(path: str | Path) -> dict[str, Any]:
 ROS_NODE_PARAMS = ("use_sim_time", "qos_overrides", "start_type_description_service")
 
 
+def _known_names() -> list[str]:
+    return [s.name for s in all_param_specs()] + list(ROS_NODE_PARAMS)
+
+
 def _check_names(values: dict[str, Any], path: Path) -> None:
     """Refuse names no parameter has (a misspelt name would otherwise be ignored and the
     default used), suggesting the closest known name."""
-    known = [s.name for s in all_param_specs()] + list(ROS_NODE_PARAMS)
+    known = _known_names()
     unknown = [str(k) for k in values if k not in known]
     if not unknown:
         return

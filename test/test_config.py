@@ -110,3 +110,21 @@ def test_node_and_standard_ros_parameters_are_accepted(tmp_path):
         "    use_sim_time: true\n"
     )
     assert load_params_file(path) == {"eps": 1.5, "avia_topic": "/livox/avia", "use_sim_time": True}
+
+
+def test_another_nodes_block_in_a_shared_params_file_is_left_alone(tmp_path):
+    # A launch setup's file with several nodes: only this node's block is checked.
+    path = tmp_path / "params.yaml"
+    path.write_text(
+        "detector:\n  ros__parameters:\n    eps: 1.5\n"
+        "livox_driver:\n  ros__parameters:\n    xfer_format: 0\n    frame_id: livox\n"
+    )
+    values = load_params_file(path)
+    assert values["eps"] == 1.5
+    path.write_text(
+        "/rig/clusterfilter_detector:\n  ros__parameters:\n    eps: 1.5\n"
+        "    min_cluster_point: 5\n"
+        "livox_driver:\n  ros__parameters:\n    xfer_format: 0\n"
+    )
+    with pytest.raises(InputError, match="min_cluster_point .did you mean min_cluster_points"):
+        load_params_file(path)

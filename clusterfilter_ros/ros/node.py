@@ -72,11 +72,11 @@ from clusterfilter_ros.dds import apply_loopback_defaults
 from clusterfilter_ros.errors import ClusterfilterError, ParameterError
 from clusterfilter_ros.io.pointcloud2 import decode_pointcloud2, make_pointcloud2
 from clusterfilter_ros.ros.merge import AddResult, MergedFrame, StampMerger
+from clusterfilter_ros.ros.node_params import NODE_NAME
 from clusterfilter_ros.ros.signals import shutdown_race, stop_on_signals
 from clusterfilter_ros.ros.stamps import seconds_to_time_msg
 from clusterfilter_ros.ros.transforms import Extrinsic
 
-NODE_NAME = "clusterfilter_detector"
 POSE_TOPIC = "/uav/pose"
 DELAYED_POSE_TOPIC = "/uav/pose_delayed"
 POINTS_TOPIC = "/uav/points"

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from clusterfilter_ros.core.params import ParamSpec
 
+#: The node's default name (``ros2 run clusterfilter_ros detector``).
+NODE_NAME = "clusterfilter_detector"
+
 #: Identity transform, ``[x, y, z, qx, qy, qz, qw]``.
 IDENTITY_EXTRINSIC: list[float] = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
 
