@@ -533,7 +533,14 @@ def detect_offline(
     was_split = None
     if params.split_merged:
         labels, k, scores, was_split = split_and_score(
-            labels, xyz, t, scores, params, score, structure
+            labels,
+            xyz,
+            t,
+            scores,
+            params,
+            score,
+            structure,
+            excess_residual=params.split_excess_residual,
         )
     if params.split_still:
         cut_labels, k, cut = split_still(labels, xyz, t, scores, params)

@@ -591,6 +591,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1000.0,
     ),
     ParamSpec(
+        "split_excess_residual",
+        "float",
+        0.3,
+        "Splitting merged clusters, offline only: a flying cluster below min_confidence "
+        "whose excess residual (m, beyond the windows' expected scatter) is above this is "
+        "split too, however narrow (a bird's returns joined to a drone's track make it "
+        "irregular without widening it); 0 = off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "stream_split_min_extent",
         "float",
         2.5,

@@ -185,7 +185,10 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
 
 
 def merged_clusters(
-    scores: ClusterScores, params: ParamSet, min_extent: float | None = None
+    scores: ClusterScores,
+    params: ParamSet,
+    min_extent: float | None = None,
+    excess_residual: float = 0.0,
 ) -> np.ndarray:
     """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
     high), with at least twice ``min_cluster_points`` and at most ``max_cluster_points``
@@ -193,11 +196,17 @@ def merged_clusters(
     as a whole) or wider than ``min_extent`` (default ``split_min_extent``; streaming
     passes ``stream_split_min_extent``) and below ``min_confidence`` (birds 2-3 m from
     the drone make a cluster narrow enough to pass the extent gate, which then fails on
-    its smoothness)."""
+    its smoothness), or, with ``excess_residual`` > 0, below ``min_confidence`` with a
+    larger excess residual, however narrow (a bird's returns joined to a drone's
+    track, offline's ``split_excess_residual``; deviation 74)."""
     if min_extent is None:
         min_extent = params.split_min_extent
     wide = scores.local_extent > params.max_local_extent
     wide |= (scores.local_extent > min_extent) & (scores.confidence < params.min_confidence)
+    if excess_residual > 0:
+        wide |= (scores.excess_residual > excess_residual) & (
+            scores.confidence < params.min_confidence
+        )
     return np.nonzero(
         wide
         & (scores.centroid[:, 2] >= params.min_centroid_z)
@@ -214,9 +223,10 @@ def split_merged(
     params: ParamSet,
     structure_keys: np.ndarray | None = None,
     min_extent: float | None = None,
+    excess_residual: float = 0.0,
 ) -> tuple[np.ndarray, int, np.ndarray]:
-    """Labels with each of :func:`merged_clusters` (``min_extent`` passed on) replaced by
-    its kinematic tracks.
+    """Labels with each of :func:`merged_clusters` (``min_extent`` and
+    ``excess_residual`` passed on) replaced by its kinematic tracks.
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
@@ -225,7 +235,7 @@ def split_merged(
     K, (N,) bool mask of the points that were in a split cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
-    split = merged_clusters(scores, params, min_extent)
+    split = merged_clusters(scores, params, min_extent, excess_residual)
     k = int(labels.max()) + 1 if labels.size else 0
     if split.size and structure_keys is not None and structure_keys.size:
         which = np.zeros(k, dtype=bool)
@@ -262,6 +272,7 @@ def split_and_score(
     score: Scorer,
     structure_keys: np.ndarray | None = None,
     min_extent: float | None = None,
+    excess_residual: float = 0.0,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
     """:func:`split_merged`, then the scores of the new labels.
 
@@ -269,7 +280,9 @@ def split_and_score(
     window origin, ``t0``); the clusters left whole keep theirs. Returns (labels, K,
     scores, mask of the points that were in a split cluster).
     """
-    out, k, was_split = split_merged(labels, xyz, t, scores, params, structure_keys, min_extent)
+    out, k, was_split = split_merged(
+        labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual
+    )
     return out, k, score_pieces(labels, out, k, was_split, xyz, t, scores, params, score), was_split
 
 

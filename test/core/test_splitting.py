@@ -258,6 +258,27 @@ def test_narrower_clusters_are_split_only_when_they_fail_as_a_whole():
     assert merged_clusters(scores, params, min_extent=0.3).tolist() == [0, 2, 3]
 
 
+def test_a_narrow_cluster_failing_on_its_residual_is_split_only_offline():
+    # Deviation 74: a bird's returns joined to a drone's whole track leave the cluster
+    # narrow (0.5 m) but irregular; below min_confidence with an excess residual over
+    # split_excess_residual it is split when the caller passes that bound (offline);
+    # without it (streaming) it is left whole.
+    params = detector_params()
+    xyz, t, _ = _merged_scene()
+    labels = np.repeat(np.arange(3), int(np.ceil(t.size / 3)))[: t.size]
+    scores = score_clusters(labels, xyz, t, params, n_clusters=3)
+    narrow = 0.8 * params.split_min_extent
+    bound = params.split_excess_residual
+    scores = dataclasses.replace(
+        scores,
+        local_extent=np.full(3, narrow),
+        excess_residual=np.array([2 * bound, 2 * bound, 0.5 * bound]),
+        confidence=np.array([0.1, 0.9, 0.1]),  # 1 confident, 2 regular enough
+    )
+    assert merged_clusters(scores, params).tolist() == []
+    assert merged_clusters(scores, params, excess_residual=bound).tolist() == [0]
+
+
 def _drone_with_bird_below(duration: float, below: float):
     """(xyz, t, is_drone): a sparse drone (one return a frame, 8 s) and a bird crossing
     ``below`` m under it from 4 s for ``duration`` s with ten returns a frame, joined
