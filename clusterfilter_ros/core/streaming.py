@@ -137,13 +137,17 @@ _STILL_SIGMAS = 3.0
 
 
 def _speed_standard_error(
-    ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, slope: np.ndarray, mean: np.ndarray
+    ts: np.ndarray,
+    ps: np.ndarray,
+    ws: np.ndarray,
+    line: tuple[np.ndarray, np.ndarray, float],
 ) -> float:
-    """Standard error (m/s) of the speed of the weighted line ``mean + (t - tc) * slope``
-    (``tc`` the weighted mean time) through samples weighted by their point counts (each
-    sample the mean of that many returns); inf with fewer than three samples or no
-    spread in time."""
-    dt = ts - float((ts * ws).sum() / ws.sum())
+    """Standard error (m/s) of the speed of the weighted line ``line`` = (slope, mean,
+    tc) of :func:`weighted_line`, ``mean + (t - tc) * slope``, through samples weighted
+    by their point counts (each sample the mean of that many returns); inf with fewer
+    than three samples or no spread in time."""
+    slope, mean, tc = line
+    dt = ts - tc
     sxx = float((ws * dt * dt).sum())
     if ts.size < 3 or not sxx > 0.0:
         return math.inf
@@ -758,14 +762,14 @@ class StreamingDetector:
         ts, ps, ws = _sample_arrays(samples)
         slope, mean, tc = _track_line(ts, ps, ws, p)
         quadratic = None
-        moving = float(np.linalg.norm(slope)) >= p.min_speed
-        if moving and ts.size >= 6 and ts[-1] - ts[0] >= 0.6:
+        speed = float(np.linalg.norm(slope))
+        if speed >= p.min_speed and ts.size >= 6 and ts[-1] - ts[0] >= 0.6:
             coef = weighted_quadratic(ts - tc, ps, ws)
             if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
                 quadratic = coef
-        speed = float(np.linalg.norm(slope))
         still = speed < p.min_speed and (
-            speed == 0.0 or speed < _STILL_SIGMAS * _speed_standard_error(ts, ps, ws, slope, mean)
+            speed == 0.0
+            or speed < _STILL_SIGMAS * _speed_standard_error(ts, ps, ws, (slope, mean, tc))
         )
         fit = _TrackFit(
             tuple(samples), p, int(ws.sum()), slope, mean, tc, float(ts[-1]), quadratic, still

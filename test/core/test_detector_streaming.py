@@ -269,7 +269,7 @@ def test_the_speed_standard_error_of_a_track_line():
     truth = np.array([0.5, -0.2, 0.1])
     ps = 10.0 + ts[:, None] * truth + rng.normal(0.0, 0.1, (ts.size, 3)) / np.sqrt(ws)[:, None]
     slope, mean, tc = weighted_line(ts, ps, ws)
-    se = _speed_standard_error(ts, ps, ws, slope, mean)
+    se = _speed_standard_error(ts, ps, ws, (slope, mean, tc))
     # Per axis, the textbook weighted least-squares standard error of the slope.
     dt = ts - tc
     resid = ps - mean - dt[:, None] * slope
@@ -278,11 +278,11 @@ def test_the_speed_standard_error_of_a_track_line():
     assert 0.01 < se < 0.5
     # Exactly on a line: zero; too few samples or no spread in time: unknown (inf).
     on_line = 10.0 + ts[:, None] * truth
-    slope, mean, _ = weighted_line(ts, on_line, ws)
-    assert _speed_standard_error(ts, on_line, ws, slope, mean) == pytest.approx(0.0, abs=1e-9)
-    assert _speed_standard_error(ts[:2], ps[:2], ws[:2], slope, mean) == np.inf
-    flat = np.zeros(3)
-    assert _speed_standard_error(np.ones(4), ps[:4], ws[:4], flat, ps[:4].mean(0)) == np.inf
+    line = weighted_line(ts, on_line, ws)
+    assert _speed_standard_error(ts, on_line, ws, line) == pytest.approx(0.0, abs=1e-9)
+    assert _speed_standard_error(ts[:2], ps[:2], ws[:2], line) == np.inf
+    flat = (np.zeros(3), ps[:4].mean(0), 1.0)
+    assert _speed_standard_error(np.ones(4), ps[:4], ws[:4], flat) == np.inf
 
 
 def test_the_estimate_for_a_frame_uses_the_returns_of_its_own_scan():
