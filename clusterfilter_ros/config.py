@@ -73,7 +73,7 @@ def load_params_file(path: str | Path) -> dict[str, Any]:
         raise InputError(f"params file {path} must hold a mapping")
     values: dict[str, Any] = {}
     nested = any(isinstance(v, dict) and "ros__parameters" in v for v in data.values())
-    known = set(_known_names())
+    known = _known_names()
     if nested:
         for node, params in data.items():
             if not (isinstance(params, dict) and "ros__parameters" in params):
@@ -90,10 +90,10 @@ def load_params_file(path: str | Path) -> dict[str, Any]:
                 # This node's block (by its name, or mostly its parameters): a name it
                 # does not know is a misspelling. Another node's, in a file shared by
                 # several, is left alone.
-                _check_names(block, path)
+                _check_names(block, path, known)
             values.update(block)
     else:
-        _check_names(data, path)
+        _check_names(data, path, known)
         values.update(data)
     return values
 
@@ -106,10 +106,9 @@ def _known_names() -> list[str]:
     return [s.name for s in all_param_specs()] + list(ROS_NODE_PARAMS)
 
 
-def _check_names(values: dict[str, Any], path: Path) -> None:
-    """Refuse names no parameter has (a misspelt name would otherwise be ignored and the
+def _check_names(values: dict[str, Any], path: Path, known: list[str]) -> None:
+    """Refuse names not in ``known`` (a misspelt name would otherwise be ignored and the
     default used), suggesting the closest known name."""
-    known = _known_names()
     unknown = [str(k) for k in values if k not in known]
     if not unknown:
         return

@@ -26,7 +26,7 @@ import numpy as np
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame, Sequence, TimedPositions
 from clusterfilter_ros.errors import InputError
 from clusterfilter_ros.io.atomic import atomic_output_dir
-from clusterfilter_ros.io.pointcloud2 import finite_rows
+from clusterfilter_ros.io.pointcloud2 import MAX_ROS1_SEC, finite_rows
 
 #: Challenge sub-folder name -> canonical sensor name.
 SENSOR_FOLDERS: dict[str, str] = {"lidar_360": MID360, "livox_avia": AVIA}
@@ -51,7 +51,7 @@ class StampedFile:
 
 
 #: Largest stamp (s) a ROS header can hold (ROS 1 ``time.secs`` is a uint32).
-MAX_STAMP_SECONDS = 2**32 - 1
+MAX_STAMP_SECONDS = MAX_ROS1_SEC
 
 
 def parse_stamp(path: Path) -> float:
@@ -320,9 +320,13 @@ def read_sequence_folder(
     """A whole sequence folder: lidar frames in time order plus ground truth if present."""
     p = _require_sequence_folder(path)
     frames = list(iter_frames_folder(p, sensors))
-    gt_dir = p / GROUND_TRUTH_FOLDER
-    ground_truth = read_ground_truth_folder(gt_dir) if gt_dir.is_dir() else None
-    return Sequence(name=p.name, frames=frames, ground_truth=ground_truth)
+    return Sequence(name=p.name, frames=frames, ground_truth=sequence_ground_truth(p))
+
+
+def sequence_ground_truth(path: str | os.PathLike[str]) -> TimedPositions | None:
+    """The ground truth of a sequence folder (its ``ground_truth/``), None without one."""
+    gt_dir = _require_sequence_folder(path) / GROUND_TRUTH_FOLDER
+    return read_ground_truth_folder(gt_dir) if gt_dir.is_dir() else None
 
 
 def _pad_sizes(pad: int | SequenceABC[int] | None) -> list[int] | None:

@@ -211,10 +211,7 @@ def read_input_ground_truth(
     if kind == "mmaud-root":
         open_input(p)  # raises the "pass one of them" error
     if kind == "mmaud":
-        gt_dir = p / challenge.GROUND_TRUTH_FOLDER
-        if gt_dir.exists() and not gt_dir.is_dir():
-            raise InputError(f"{gt_dir}: not a folder (it should hold <stamp>.npy files)")
-        return challenge.read_ground_truth_folder(gt_dir) if gt_dir.is_dir() else None
+        return challenge.sequence_ground_truth(p)
     from clusterfilter_ros.io import bags
 
     if ground_truth_topic:

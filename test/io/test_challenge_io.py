@@ -221,18 +221,10 @@ def test_symlink_loop_among_the_npy_files_names_the_file(tmp_path: Path) -> None
         read_sequence_folder(seq_dir)
 
 
-def test_unreadable_folder_is_an_input_error(tmp_path: Path, monkeypatch) -> None:
-    # chmod does not stop root (CI runs as root): make the OS refuse by monkeypatching.
+def test_unreadable_folder_is_an_input_error(tmp_path: Path, monkeypatch, deny_inside) -> None:
     seq_dir = tmp_path / "s"
     _write_raw(seq_dir / "lidar_360", "1.0.npy", np.ones((3, 3)))
-    real_is_dir = Path.is_dir
-
-    def is_dir(self: Path) -> bool:
-        if self.parent == seq_dir:
-            raise PermissionError(13, "Permission denied", str(self))
-        return real_is_dir(self)
-
-    monkeypatch.setattr(Path, "is_dir", is_dir)
+    deny_inside("is_dir", seq_dir)
     with pytest.raises(InputError, match=r"s/lidar_360: cannot access \(Permission denied\)"):
         is_sequence_folder(seq_dir)
 

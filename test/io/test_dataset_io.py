@@ -10,18 +10,10 @@ from clusterfilter_ros.errors import InputError
 from clusterfilter_ros.io.dataset import detect_input_kind, is_bag
 
 
-def test_unreadable_bag_folder_is_an_input_error(tmp_path: Path, monkeypatch) -> None:
-    # chmod does not stop root (CI runs as root): make the OS refuse by monkeypatching.
+def test_unreadable_bag_folder_is_an_input_error(tmp_path: Path, deny_inside) -> None:
     bag = tmp_path / "bag"
     bag.mkdir()
-    real_is_file = Path.is_file
-
-    def is_file(self: Path) -> bool:
-        if self.parent == bag:
-            raise PermissionError(13, "Permission denied", str(self))
-        return real_is_file(self)
-
-    monkeypatch.setattr(Path, "is_file", is_file)
+    deny_inside("is_file", bag)
     culprit = r"bag/metadata\.yaml: cannot access \(Permission denied\)"
     with pytest.raises(InputError, match=culprit):
         is_bag(bag)
