@@ -451,6 +451,10 @@ def extend_track(
     too: a drone stopping into a hover (backwards in time: speeding away from one). An
     end slower than ``min_speed`` (hovering) also takes, across gaps longer than that up
     to ``extend_hover_gap``, the returns within ``track_gate`` of where it was heading.
+    An end leaving the lidars (:func:`_leaving`: a pass whose returns thin out with
+    range) takes, across gaps up to ``extend_far_gap``, a lone return near its line
+    farther out (:func:`_near_line`) at a spot that returned nothing else a second
+    before or after (:func:`_seen_again`).
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
     the end. Returns the new member mask.
     """
@@ -469,6 +473,8 @@ def extend_track(
     # clusterer) stays a member but does not define where the track was heading.
     inner = member & ~_stray_end_points(member, xyz, t, params)
     hover_gap = float(params.extend_hover_gap)
+    far_gap = float(params.extend_far_gap)
+    viewpoint = np.asarray(params.viewpoint, dtype=np.float64)
     for forward in (True, False):
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
@@ -479,7 +485,12 @@ def extend_track(
                 # A lone return taken across a hover's pause: still hovering there.
                 vel = np.zeros(3)
             slow = vel is not None and float(np.linalg.norm(vel)) < params.min_speed
-            span = max(gap, hover_gap) if slow else gap
+            end_range = float(np.linalg.norm(pos - viewpoint))
+            leaving = far_gap > gap and _leaving(pos - viewpoint, vel, forward)
+            if slow:
+                span = max(gap, hover_gap)
+            else:
+                span = max(gap, far_gap) if leaving else gap
             if forward:
                 lo = np.searchsorted(pool_t, edge, side="right")
                 hi = np.searchsorted(pool_t, edge + span, side="right")
@@ -501,12 +512,18 @@ def extend_track(
             else:
                 pred = pos + dt[:, None] * vel
                 reach = linking_reach(adt, params)
-                if span > gap:  # a hovering end: beyond the usual gap, where it was
+                if slow and span > gap:  # a hovering end: beyond the usual gap, where it was
                     reach = np.where(adt > gap, params.track_gate, reach)
             pts = xyz[pool_idx[cand]]
             ok = np.linalg.norm(pts - pred, axis=1) <= reach
             if vel is not None:
                 ok |= _braking_offsets(pts, pos, vel, dt, params) <= params.link_gate
+            if leaving:  # beyond the usual gap: a lone return far out, near its line
+                beyond = adt > gap
+                if beyond.any():
+                    ok &= ~beyond | _near_line(pts, pos, vel, dt, end_range, viewpoint, params)
+                    for i in np.nonzero(ok & beyond)[0]:
+                        ok[i] = not _seen_again(pool_idx[cand[i]], xyz, t, params)
             if not ok.any():
                 break
             # The nearest frame in time among the reachable points joins the track.
@@ -516,6 +533,63 @@ def extend_track(
             member[pool_idx[join]] = True
             inner[pool_idx[join]] = True
     return member
+
+
+#: Slowest end (m/s) that grows across gaps up to ``extend_far_gap`` while leaving.
+_LEAVING_MIN_SPEED = 3.0
+#: Nearest (m from ``viewpoint``) a return taken across such a gap may be: closer in, a
+#: drone gives returns every frame or two, and a gap of seconds is not its range.
+_LEAVING_MIN_RANGE = 40.0
+
+
+def _leaving(offset: np.ndarray, vel: np.ndarray | None, forward: bool) -> bool:
+    """Whether a track end at ``offset`` from the viewpoint, with velocity ``vel``, moves
+    away from the lidars in the direction of growth (forward in time: receding;
+    backward: it came from farther out) at least ``_LEAVING_MIN_SPEED``, mostly along
+    the line of sight (radial speed at least half its speed): a pass whose returns
+    thin out with range, seconds apart at 50-80 m."""
+    if vel is None:
+        return False
+    speed = float(np.linalg.norm(vel))
+    distance = float(np.linalg.norm(offset))
+    if speed < _LEAVING_MIN_SPEED or distance <= 0.0:
+        return False
+    radial = float(vel @ offset) / distance
+    return (radial if forward else -radial) >= 0.5 * speed
+
+
+def _near_line(
+    pts: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    dt: np.ndarray,
+    end_range: float,
+    viewpoint: np.ndarray,
+    params: ParamSet,
+) -> np.ndarray:
+    """(M,) bool: points ``dt`` s from a leaving track's end (``pos``, velocity ``vel``,
+    ``end_range`` from ``viewpoint``) that lie farther out than the end, within the
+    linking reach along its line and within ``link_gate`` plus a quarter of the
+    acceleration allowance across it: at 10 m/s and 50-80 m out, a pass holds its
+    course better than its speed, and a looser gate takes vegetation and structure
+    returns at the same range (fast_pass, 270 tuning runs)."""
+    unit = vel / float(np.linalg.norm(vel))
+    off = pts - (pos + dt[:, None] * vel)
+    along = off @ unit
+    across = np.linalg.norm(off - along[:, None] * unit, axis=1)
+    reach = linking_reach(dt, params)
+    lateral = params.link_gate + 0.125 * params.link_max_accel * dt * dt
+    distance = np.linalg.norm(pts - viewpoint, axis=1)
+    far = (distance > end_range) & (distance >= _LEAVING_MIN_RANGE)
+    return far & (np.abs(along) <= reach) & (across <= lateral)
+
+
+def _seen_again(i: int, xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> bool:
+    """Whether any other return lies within two ``link_gate`` of point ``i`` more than a
+    second before or after it: a tree crown or a wall far out returns now and then at
+    the same spot (too seldom to be static), a drone passing through does not."""
+    near = np.linalg.norm(xyz - xyz[i], axis=1) <= 2.0 * params.link_gate
+    return bool((near & (np.abs(t - t[i]) > 1.0)).any())
 
 
 def _braking_offsets(

@@ -181,7 +181,7 @@ def cluster_trajectory(
         max_extrapolation=params.max_extrapolation,
         bin_seconds=params.frame_period / 2,
         confidence=np.full(t.size, confidence),
-        context_gap=float(params.link_max_gap),
+        context_gap=max(float(params.link_max_gap), float(params.extend_far_gap)),
         context_window=float(params.link_fit_window),
         stray_distance=float(params.stray_distance),
         stray_speed=float(params.link_max_speed),

@@ -539,6 +539,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "extend_far_gap",
+        "float",
+        3.0,
+        "Offline: a selected track's end moving away from viewpoint (forward in time; "
+        "towards it, backward) at 3 m/s or more grows across gaps up to this (s) by a lone "
+        "return at least 40 m out, farther than the end, near the line it was on, at a "
+        "spot nothing else returned from a second before or after (a pass leaving the "
+        "lidars' range, its last returns seconds apart); such a return's estimates take "
+        "the track's velocity. At or below extend_max_gap, as any end.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "extend_max_brake",
         "float",
         8.0,

@@ -6,8 +6,9 @@ consecutive samples are more than ``max_gap`` seconds apart. Each segment with a
 five samples gets a cubic smoothing B-spline per axis
 (:func:`scipy.interpolate.make_smoothing_spline`, smoothing chosen by generalised
 cross-validation); shorter segments get a weighted straight line (or a constant).
-With ``context_gap`` set (offline: ``link_max_gap``, as all samples belong to one
-linked track), a short segment's line is fitted through its neighbours' nearest
+With ``context_gap`` set (offline: the longer of ``link_max_gap`` and
+``extend_far_gap``, the longest gaps growth and linking cross, as all samples belong to
+one linked track), a short segment's line is fitted through its neighbours' nearest
 ``context_window`` seconds as well, when they are at most ``context_gap`` away: one or
 two returns after a gap then move on with the track's velocity instead of standing still.
 That line judges strays (:func:`fit_trajectory`); the line returned keeps its velocity

@@ -649,3 +649,68 @@ def test_extend_track_hover_pause_takes_only_returns_on_the_spot_within_the_gap(
     xyz, t = _hover_with_a_pause(earlier)
     member = t > 15.0
     assert not extend_track(member, xyz, t, ~member, detector_params())[~member].any()
+
+
+def _pass_with_a_lone_return(direction: np.ndarray, lone_behind: float = 7.7):
+    """A drone passing at 11 m/s along ``direction`` from 25 m out along a fixed line
+    of sight, two returns a frame for 1 s, then one return 2.7 s after the last frame,
+    ``lone_behind`` m short of where the track was heading (it slowed down): fast_pass
+    seed 2501 leaving the rig. Returns (xyz, t, member)."""
+    rng = np.random.default_rng(11)
+    sight = np.array([0.8, -0.55, 0.25])
+    sight /= np.linalg.norm(sight)
+    direction = direction / np.linalg.norm(direction)
+    frames = np.repeat(np.arange(11) * 0.1, 2)
+    track = 25.0 * sight + frames[:, None] * 11.0 * direction
+    track += rng.normal(0.0, 0.1, track.shape)
+    lone_t = frames[-1] + 2.7
+    lone = 25.0 * sight + (lone_t * 11.0 - lone_behind) * direction
+    xyz = np.concatenate([track, lone[None]])
+    t = np.concatenate([frames, [lone_t]])
+    return xyz, t, t <= frames[-1]
+
+
+def test_extend_track_follows_a_pass_leaving_the_lidars_across_a_longer_gap():
+    sight = np.array([0.8, -0.55, 0.25])
+    xyz, t, member = _pass_with_a_lone_return(sight)
+    assert extend_track(member, xyz, t, ~member, detector_params())[~member].all()
+    off = detector_params({"extend_far_gap": 0.0})
+    assert not extend_track(member, xyz, t, ~member, off)[~member].any()
+    # Backwards in time: the same pass arriving, its first return 2.7 s before the rest.
+    xyz_in, t_in = xyz.copy(), -t
+    assert extend_track(member, xyz_in, t_in, ~member, detector_params())[~member].all()
+
+
+def test_extend_track_takes_no_longer_gap_for_a_pass_across_the_line_of_sight():
+    # Moving across the line of sight, the track's returns do not thin out with range:
+    # a gap of 2.7 s is not bridged.
+    across = np.cross(np.array([0.8, -0.55, 0.25]), [0.0, 0.0, 1.0])
+    xyz, t, member = _pass_with_a_lone_return(across)
+    assert not extend_track(member, xyz, t, ~member, detector_params())[~member].any()
+
+
+def test_extend_track_takes_no_longer_gap_into_a_spot_that_returns_again():
+    # The same lone return, but the spot also returned 5 s later (a tree crown far out,
+    # hit too seldom to be static): not taken across the longer gap.
+    sight = np.array([0.8, -0.55, 0.25])
+    xyz, t, member = _pass_with_a_lone_return(sight)
+    again = xyz[-1] + np.array([0.5, 0.3, -0.4])
+    xyz2 = np.concatenate([xyz, again[None]])
+    t2 = np.concatenate([t, [t[-1] + 5.0]])
+    member2 = np.concatenate([member, [False]])
+    grown = extend_track(member2, xyz2, t2, ~member2, detector_params())
+    assert not grown[~member2].any()
+
+
+def test_extend_track_takes_no_longer_gap_close_in():
+    # A lone return 2.7 s after a track leaving at 3.6 m/s, 26 m out: that close, a drone
+    # returns every frame or two, and the gap is not its range.
+    sight = np.array([0.8, -0.55, 0.25])
+    sight /= np.linalg.norm(sight)
+    frames = np.repeat(np.arange(11) * 0.1, 2)
+    track = 20.0 * sight + frames[:, None] * 3.6 * sight
+    lone_t = frames[-1] + 2.7
+    xyz = np.concatenate([track, (20.0 + 3.6 * lone_t) * sight[None]])
+    t = np.concatenate([frames, [lone_t]])
+    member = t <= frames[-1]
+    assert not extend_track(member, xyz, t, ~member, detector_params())[~member].any()
