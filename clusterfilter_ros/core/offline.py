@@ -541,6 +541,7 @@ def detect_offline(
             score,
             structure,
             excess_residual=params.split_excess_residual,
+            two_trackers=True,
         )
     if params.split_still:
         cut_labels, k, cut = split_still(labels, xyz, t, scores, params)

@@ -20,6 +20,11 @@ way a tracker would:
    starts a new one;
 3. every track becomes a cluster of its own and is scored like any other.
 
+Which track keeps the drone among birds within a metre of it depends on the assignment;
+offline (:func:`split_and_score` with ``two_trackers``) each cluster is also split with a
+matching cascade (tracks with a velocity choose first) and keeps the split whose best
+reportable piece ranks higher.
+
 Only flying clusters are split (centroid above ``min_centroid_z``), and, when the static
 structure is known, only those with at most :data:`MAX_CONTACT` of their points in or
 next to its voxels: what suppression leaves of walls and crowns is often wide, and
@@ -91,8 +96,9 @@ def _predictions(
     last_p: np.ndarray,
     now: float,
     params: ParamSet,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted position at ``now`` (L, 3) and reach (L,) of each live track.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Predicted position at ``now`` (L, 3), reach (L,) and whether it has a velocity
+    (L,) bool, of each live track.
 
     ``track``, ``g_t``, ``g_p``: track, time and position of the groups seen recently;
     ``live``: the live tracks' ids; ``last_t`` / ``last_p``: every track's newest group.
@@ -124,11 +130,15 @@ def _predictions(
         linking_reach(gap, params, gate),
         gate + np.minimum(params.link_max_speed * gap, 2.0 * params.link_gate),
     )
-    return centre, reach
+    return centre, reach, moving
 
 
-def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.ndarray:
-    """(N,) track label per point, 0..K-1; see the module docstring."""
+def kinematic_tracks(
+    xyz: np.ndarray, t: np.ndarray, params: ParamSet, cascade: bool = False
+) -> np.ndarray:
+    """(N,) track label per point, 0..K-1; see the module docstring. With ``cascade``,
+    the tracks with a velocity are assigned their groups first and those without one
+    take what is left (a matching cascade)."""
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     if t.size == 0:
@@ -156,7 +166,7 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
         age = now - last_t[:n_tracks]
         live = np.flatnonzero((age > 0) & (age <= params.link_max_gap))
         if live.size:
-            centre, reach = _predictions(
+            centre, reach, moving = _predictions(
                 track[lo:a],
                 g_t[lo:a],
                 g_p[lo:a],
@@ -168,12 +178,19 @@ def kinematic_tracks(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> np.nda
             )
             dist = np.linalg.norm(g_p[a:b][None, :, :] - centre[:, None, :], axis=2)
             cost = np.where(dist <= reach[:, None], dist / reach[:, None], _UNREACHABLE)
-            rows, cols = linear_sum_assignment(cost)
-            taken = cost[rows, cols] < _UNREACHABLE
-            rows, cols = rows[taken], cols[taken] + a
-            track[cols] = live[rows]
-            last_t[live[rows]] = g_t[cols]
-            last_p[live[rows]] = g_p[cols]
+            stages = (moving, ~moving) if cascade else (np.ones(live.size, dtype=bool),)
+            for stage in stages:
+                free = np.flatnonzero(track[a:b] < 0)
+                if not stage.any() or free.size == 0:
+                    continue
+                sub = cost[np.ix_(np.flatnonzero(stage), free)]
+                rows, cols = linear_sum_assignment(sub)
+                taken = sub[rows, cols] < _UNREACHABLE
+                rows = live[np.flatnonzero(stage)[rows[taken]]]
+                cols = free[cols[taken]] + a
+                track[cols] = rows
+                last_t[rows] = g_t[cols]
+                last_p[rows] = g_p[cols]
         new = a + np.flatnonzero(track[a:b] < 0)
         track[new] = np.arange(n_tracks, n_tracks + new.size)
         last_t[n_tracks : n_tracks + new.size] = g_t[new]
@@ -224,9 +241,11 @@ def split_merged(
     structure_keys: np.ndarray | None = None,
     min_extent: float | None = None,
     excess_residual: float = 0.0,
+    cascade: bool = False,
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """Labels with each of :func:`merged_clusters` (``min_extent`` and
-    ``excess_residual`` passed on) replaced by its kinematic tracks.
+    ``excess_residual`` passed on) replaced by its kinematic tracks (``cascade``:
+    :func:`kinematic_tracks`'s).
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
@@ -252,7 +271,7 @@ def split_merged(
     next_label = k
     for c in split:
         member = np.nonzero(labels == c)[0]
-        tracks = kinematic_tracks(xyz[member], t[member], params)
+        tracks = kinematic_tracks(xyz[member], t[member], params, cascade)
         out[member] = tracks + next_label
         next_label += int(tracks.max()) + 1
     labels_out, k_out = relabel_compact(out)
@@ -273,17 +292,51 @@ def split_and_score(
     structure_keys: np.ndarray | None = None,
     min_extent: float | None = None,
     excess_residual: float = 0.0,
+    two_trackers: bool = False,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
     """:func:`split_merged`, then the scores of the new labels.
 
     Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
-    window origin, ``t0``); the clusters left whole keep theirs. Returns (labels, K,
-    scores, mask of the points that were in a split cluster).
+    window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
+    each cluster is split twice, with and without the matching cascade of
+    :func:`kinematic_tracks`, and keeps the split whose best piece ranks higher
+    (:func:`_best_rank`). Returns (labels, K, scores, mask of the points that were in a
+    split cluster).
     """
-    out, k, was_split = split_merged(
-        labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual
+    args = (labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual)
+    out, k, was_split = split_merged(*args)
+    pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)
+    if not two_trackers or not was_split.any():
+        return out, k, pieces, was_split
+    alt, k_alt, _ = split_merged(*args, cascade=True)
+    alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
+    better = [
+        c
+        for c in np.unique(labels[was_split])
+        if _best_rank(alt_pieces, alt[labels == c], params)
+        > _best_rank(pieces, out[labels == c], params)
+    ]
+    if not better:
+        return out, k, pieces, was_split
+    take = np.isin(labels, better)
+    mixed = np.where(take, alt + k, out)
+    mixed, k_mixed = relabel_compact(mixed)
+    return (
+        mixed,
+        k_mixed,
+        score_pieces(labels, mixed, k_mixed, was_split, xyz, t, scores, params, score),
+        was_split,
     )
-    return out, k, score_pieces(labels, out, k, was_split, xyz, t, scores, params, score), was_split
+
+
+def _best_rank(scores: ClusterScores, piece_labels: np.ndarray, params: ParamSet) -> float:
+    """The selection rank (:meth:`ClusterScores.rank_score`) of the best of these pieces
+    that would be reported (a candidate at ``min_confidence`` or more); 0 without one."""
+    pieces = np.unique(piece_labels[piece_labels >= 0])
+    ok = pieces[scores.candidate[pieces] & (scores.confidence[pieces] >= params.min_confidence)]
+    if ok.size == 0:
+        return 0.0
+    return float(scores.rank_score(params.scoring)[ok].max())
 
 
 def score_pieces(
