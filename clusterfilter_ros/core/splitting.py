@@ -299,8 +299,8 @@ def split_and_score(
     Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
     window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
     each cluster is split twice, with and without the matching cascade of
-    :func:`kinematic_tracks`, and keeps the split whose best piece ranks higher
-    (:func:`_best_rank`). Returns (labels, K, scores, mask of the points that were in a
+    :func:`kinematic_tracks`, and keeps the split whose best reportable piece ranks
+    higher (:func:`_reportable_rank`). Returns (labels, K, scores, mask of the points that were in a
     split cluster).
     """
     args = (labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual)
@@ -310,11 +310,11 @@ def split_and_score(
         return out, k, pieces, was_split
     alt, k_alt, _ = split_merged(*args, cascade=True)
     alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
+    rank, alt_rank = _reportable_rank(pieces, params), _reportable_rank(alt_pieces, params)
     better = [
         c
         for c in np.unique(labels[was_split])
-        if _best_rank(alt_pieces, alt[labels == c], params)
-        > _best_rank(pieces, out[labels == c], params)
+        if _best_of(alt_rank, alt[labels == c]) > _best_of(rank, out[labels == c])
     ]
     if not better:
         return out, k, pieces, was_split
@@ -329,14 +329,17 @@ def split_and_score(
     )
 
 
-def _best_rank(scores: ClusterScores, piece_labels: np.ndarray, params: ParamSet) -> float:
-    """The selection rank (:meth:`ClusterScores.rank_score`) of the best of these pieces
-    that would be reported (a candidate at ``min_confidence`` or more); 0 without one."""
-    pieces = np.unique(piece_labels[piece_labels >= 0])
-    ok = pieces[scores.candidate[pieces] & (scores.confidence[pieces] >= params.min_confidence)]
-    if ok.size == 0:
-        return 0.0
-    return float(scores.rank_score(params.scoring)[ok].max())
+def _reportable_rank(scores: ClusterScores, params: ParamSet) -> np.ndarray:
+    """(K,) the selection rank (:meth:`ClusterScores.rank_score`) of each cluster that
+    would be reported (a candidate at ``min_confidence`` or more), 0 for the others."""
+    ok = scores.candidate & (scores.confidence >= params.min_confidence)
+    return np.where(ok, scores.rank_score(params.scoring), 0.0)
+
+
+def _best_of(rank: np.ndarray, piece_labels: np.ndarray) -> float:
+    """The highest ``rank`` among these pieces (labels < 0 ignored); 0 without one."""
+    pieces = piece_labels[piece_labels >= 0]
+    return float(rank[pieces].max()) if pieces.size else 0.0
 
 
 def score_pieces(
