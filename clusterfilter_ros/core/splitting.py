@@ -300,8 +300,8 @@ def split_and_score(
     window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
     each cluster is split twice, with and without the matching cascade of
     :func:`kinematic_tracks`, and keeps the split whose best reportable piece ranks
-    higher (:func:`_reportable_rank`). Returns (labels, K, scores, mask of the points that were in a
-    split cluster).
+    higher (:func:`_reportable_rank`). Returns (labels, K, scores, mask of the points
+    that were in a split cluster).
     """
     args = (labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual)
     out, k, was_split = split_merged(*args)
