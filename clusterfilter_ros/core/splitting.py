@@ -311,11 +311,11 @@ def split_and_score(
     alt, k_alt, _ = split_merged(*args, cascade=True)
     alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
     rank, alt_rank = _reportable_rank(pieces, params), _reportable_rank(alt_pieces, params)
-    better = [
-        c
-        for c in np.unique(labels[was_split])
-        if _best_of(alt_rank, alt[labels == c]) > _best_of(rank, out[labels == c])
-    ]
+    better = []
+    for c in np.unique(labels[was_split]):
+        member = labels == c
+        if _best_of(alt_rank, alt[member]) > _best_of(rank, out[member]):
+            better.append(c)
     if not better:
         return out, k, pieces, was_split
     take = np.isin(labels, better)
