@@ -990,6 +990,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1.0,
     ),
     ParamSpec(
+        "hover_coast_seconds",
+        "float",
+        10.0,
+        "Streaming: a reported track slower than min_speed (a hovering drone) that a "
+        "re-clustering finds only as noise or as a cluster too small to be a candidate "
+        "(nothing rejected for its shape or motion) stays reported at min_confidence, "
+        "taking returns within track_gate, while its newest return is at most max_gap "
+        "old, for up to this many seconds after a re-clustering last chose it; 0 "
+        "switches this off.",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
         "reacquire_window",
         "float",
         3.0,

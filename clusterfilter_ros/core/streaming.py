@@ -245,6 +245,9 @@ class _TrackChoice:
     clusters: int
     foreground_points: int  # history points left after static suppression
     elapsed_ms: float
+    # No track chosen, and nothing near the reported track's prediction was rejected
+    # for what it is (its recent returns were noise, or too few to be a candidate).
+    coast: bool = False
 
 
 class StreamingDetector:
@@ -286,6 +289,7 @@ class StreamingDetector:
         self._track: deque[_TrackSample] = deque()
         self._fit_cache: _TrackFit | None = None
         self._selected_conf = 0.0
+        self._chosen_at = -math.inf  # stream time of the last re-clustering choosing a track
         self._now = -math.inf
         self._origin = math.nan
         self._last_recluster = -math.inf
@@ -554,24 +558,57 @@ class StreamingDetector:
             self._drop_static_from_history()
         old_track = list(self._track)
         old_conf = self._selected_conf
+        old_velocity = None
+        if old_track and old_conf >= self.params.min_confidence:
+            old_velocity = self._track_state()[2]
         self._track.clear()
         self._selected_conf = 0.0
         self._clusters = choice.clusters
         self._foreground_points = choice.foreground_points
+        p = self.params
         if choice.samples is not None:
             self._selected_conf = choice.confidence
             self._track.extend(choice.samples)
+            if choice.confidence >= p.min_confidence:
+                self._chosen_at = choice.snapshot.now
             if choice.new_track:
                 self._carry_over(old_track)
                 self._catch_up()
             else:
                 self._catch_up(after=choice.snapshot.now)
+        elif old_velocity is not None and self._hover_coasts(choice, old_track, old_velocity):
+            # Deviation 77: the re-clustering found nothing against the hovering track,
+            # only too little of it to confirm it again.
+            self._selected_conf = p.min_confidence
+            self._track.extend(old_track)
+            self._catch_up()
         if self.params.report_lag > 0 and old_track and old_conf >= self.params.min_confidence:
             self._archive_piece(old_track, old_conf, choice.snapshot.now)
         ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
         self._reclusters += 1
+
+    def _hover_coasts(
+        self, choice: _TrackChoice, old_track: list[_TrackSample], velocity: np.ndarray
+    ) -> bool:
+        """Whether the reported track ``old_track`` (fitted ``velocity``), which the
+        re-clustering ``choice`` neither selected nor kept, stays the track
+        (``hover_coast_seconds``): it is slower than ``min_speed``, its newest sample is
+        at most ``max_gap`` old (a track without returns for longer is dropped as
+        before: forgotten by the late output, not kept as lost), a re-clustering chose
+        it at most ``hover_coast_seconds`` ago, and what lay near its prediction was
+        noise or too few points to be a candidate, not a cluster rejected for its shape
+        or motion."""
+        p = self.params
+        now = choice.snapshot.now
+        return (
+            p.hover_coast_seconds > 0
+            and choice.coast
+            and float(np.linalg.norm(velocity)) < p.min_speed
+            and now - max(s.t for s in old_track) <= p.max_gap
+            and now - self._chosen_at <= p.hover_coast_seconds
+        )
 
     def _archive_piece(self, old_track: list[_TrackSample], confidence: float, now: float) -> None:
         """After the re-clustering of stream time ``now`` replaced the reported track
@@ -937,11 +974,13 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             xyz, t = xyz.take(moving, axis=0), t.take(moving)
     structure = static if p.static_suppression else None
 
-    def choice(mask: np.ndarray | None, confidence: float, new: bool, k: int) -> _TrackChoice:
+    def choice(
+        mask: np.ndarray | None, confidence: float, new: bool, k: int, coast: bool = False
+    ) -> _TrackChoice:
         samples = None if mask is None else _track_samples(mask, xyz, t, p)
         ms = (time.perf_counter() - start) * 1e3
         n = 0 if t is None else int(t.size)
-        return _TrackChoice(snap, static, samples, confidence, new, k, n, ms)
+        return _TrackChoice(snap, static, samples, confidence, new, k, n, ms, coast)
 
     if xyz is None or t is None or t.size == 0:
         return choice(None, 0.0, False, 0)
@@ -949,7 +988,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
     labels, k = global_clusters(xyz, t, p, passes=p.stream_link_passes)
     if not k:
-        return choice(None, 0.0, False, k)
+        return choice(None, 0.0, False, k, coast=True)
     # Windows aligned to the stream's first stamp (deterministic), unless the stream's
     # clock jumped so far that the offsets would not fit an int64.
     t0 = snap.origin if 0 <= t.min() - snap.origin < 1e9 else None
@@ -987,7 +1026,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     predicted, gate = snap.expected
     c = _track_cluster(predicted, gate, labels, xyz, t, snap.now - p.track_window)
     if c is None:
-        return choice(None, 0.0, False, k)
+        return choice(None, 0.0, False, k, coast=True)
     if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
         return choice(labels == c, float(p.min_confidence), False, k)
     if p.hover_detection and p.hover_keep_frames < p.hover_min_frames:
@@ -1004,7 +1043,8 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             joined = _joined_track(o, c, labels, xyz, t, k, scorer, ps)
             if joined is not None:
                 return choice(joined[0], float(p.min_confidence), False, k)
-    return choice(None, 0.0, False, k)
+    sparse = scores.n_points[c] < ps.min_cluster_points
+    return choice(None, 0.0, False, k, coast=bool(sparse))
 
 
 def _track_samples(

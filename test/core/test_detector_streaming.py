@@ -493,6 +493,94 @@ def test_a_slow_track_takes_a_return_after_a_long_gap_within_reacquire_window():
     assert det._track[-1].t == times[-1]  # beyond the window
 
 
+def _sparse_hover_frames(duration: float = 40.0, sparse_after: float = 15.0) -> list[Frame]:
+    """Mid360 frames of a wall and a drone hovering at one spot: three returns every
+    0.5 s, then from ``sparse_after`` one return every 0.9 s (too few for a cluster once
+    the denser returns have left the 10 s history)."""
+    rng = np.random.default_rng(0)
+    frames, next_hit = [], 0.0
+    for i in range(int(duration * 10)):
+        t = i * 0.1
+        parts = [_wall(rng)]
+        if t >= next_hit - 1e-9:
+            n = 3 if t < sparse_after else 1
+            parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, 0.05, (n, 3)))
+            next_hit += 0.5 if t < sparse_after else 0.9
+        frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
+    return frames
+
+
+def test_a_hovering_drone_too_sparse_to_cluster_stays_reported_for_hover_coast_seconds():
+    frames = _sparse_hover_frames()
+    reported = {}
+    for coast in (0.0, 10.0, 30.0):
+        estimates = run_streaming(frames, detector_params({"hover_coast_seconds": coast}))
+        reported[coast] = [e.stamp - 1000.0 for e in estimates]
+        for e in estimates:
+            assert np.linalg.norm(e.position - [12.0, 6.0, 15.0]) < 0.5
+    assert min(reported[0.0]) == min(reported[10.0]) < 15.0
+    lost = max(reported[0.0])  # the re-clustering no longer finds a candidate
+    assert lost < 25.0
+    assert 9.0 < max(reported[10.0]) - lost < 11.0  # coasting for 10 s more
+    assert max(reported[30.0]) > 39.0  # to the end of the stream
+    # Between the sparse returns (0.9 s apart, within max_gap) the report goes on.
+    assert np.diff(reported[30.0]).max() < 0.15
+
+
+def test_a_hovering_track_rejected_for_its_scatter_does_not_coast(monkeypatch):
+    # From 15 s the hovering returns scatter 0.5 m (a swaying crown, not a drone): the
+    # re-clustering finds a cluster there and rejects it, so the track is not kept.
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(400):
+        t = i * 0.1
+        parts = [_wall(rng)]
+        if i % 5 == 0:
+            spread = 0.05 if t < 15.0 else 0.5
+            parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, spread, (3, 3)))
+        frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
+
+    def stamps(coast):
+        params = detector_params({"hover_coast_seconds": coast})
+        return [e.stamp for e in run_streaming(frames, params)]
+
+    assert stamps(30.0) == stamps(0.0)
+    # Were that cluster taken for too few returns, the track would coast.
+    judged = StreamingDetector._hover_coasts
+
+    def as_if_sparse(self, choice, old_track, velocity):
+        return judged(self, _coast_choice(choice.snapshot.now), old_track, velocity)
+
+    monkeypatch.setattr(StreamingDetector, "_hover_coasts", as_if_sparse)
+    assert len(stamps(30.0)) > len(stamps(0.0))
+
+
+def _coast_choice(now: float, coast: bool = True):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(coast=coast, snapshot=SimpleNamespace(now=now))
+
+
+def test_only_a_slow_fresh_recently_chosen_track_coasts():
+    times = np.arange(0.0, 2.0, 0.2)
+    hover = [(10.0 + 0.01 * t, 5.0, 20.0) for t in times]
+    fast = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
+    now = times[-1] + 0.5
+
+    def coasts(path, choice, chosen_at=1.0, **values):
+        det = _tracked(times, path, **values)
+        det._chosen_at = chosen_at
+        return det._hover_coasts(choice, list(det._track), det._track_state()[2])
+
+    assert coasts(hover, _coast_choice(now))
+    assert not coasts(fast, _coast_choice(now))  # a moving track: no coasting
+    assert not coasts(hover, _coast_choice(now, coast=False))  # a rejected cluster there
+    assert not coasts(hover, _coast_choice(now), hover_coast_seconds=0.0)
+    assert not coasts(hover, _coast_choice(now), chosen_at=now - 10.5)  # chosen too long ago
+    late = times[-1] + 1.5  # the newest return older than max_gap (1 s)
+    assert not coasts(hover, _coast_choice(late), chosen_at=late - 1.0)
+
+
 def test_a_lost_track_is_looked_for_where_it_would_be_now():
     times = np.arange(0.0, 2.0, 0.2)
     fast = [(10.0 + 8.0 * t, 5.0, 20.0) for t in times]
