@@ -15,7 +15,10 @@ Every ``recluster_period`` seconds of stream time the pending frames go into the
 persistence map, the non-static history points are clustered (voxel connected
 components, then track linking), each cluster is scored by the same code as offline and
 the best candidate becomes the track; returns the previous track had gathered since are
-carried over, and the history after the track's newest sample is caught up. Between
+carried over, and the history after the track's newest sample is caught up. A reported
+track whose cluster scores lower is kept while it passes ``keep_confidence``
+(hysteresis), and a hovering one whose returns only became too few to cluster is kept
+for up to ``hover_coast_seconds``. Between
 re-clusterings, new points within ``track_gate`` metres of the predicted position extend
 the track, up to ``max_gap`` seconds after its newest sample. The estimate for a frame is
 a weighted straight-line fit (a quadratic for a well-sampled moving track, continued along
