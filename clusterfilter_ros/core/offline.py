@@ -532,6 +532,10 @@ def detect_offline(
     scores = score(labels, xyz, t, params, n_clusters=k)
     was_split = None
     if params.split_merged:
+        # Split whatever the cluster's contact with suppressed structure (deviation 78):
+        # birds circling a drone for seconds make voxels static around both, and the
+        # merged cluster, barely coherent, was left whole as a remnant of structure.
+        # Streaming keeps the contact test (it let a bird piece be reported live).
         labels, k, scores, was_split = split_and_score(
             labels,
             xyz,
@@ -539,7 +543,7 @@ def detect_offline(
             scores,
             params,
             score,
-            structure,
+            None,
             excess_residual=params.split_excess_residual,
             two_trackers=True,
         )

@@ -48,6 +48,24 @@ def test_paper_scoring_and_dbscan_find_the_same_drone(scene, drone_path_fn):
         assert rmse(res.estimates, drone_path_fn) < 0.6, values
 
 
+def test_offline_splits_a_merged_cluster_whatever_its_contact_with_structure(scene, monkeypatch):
+    # Deviation 78: offline passes no structure to the splitter, so a drone merged with
+    # birds beside voxels they made static is split (streaming keeps the test).
+    from clusterfilter_ros.core import offline
+
+    seen = []
+    real = offline.split_and_score
+
+    def spy(*args, **kwargs):
+        seen.append(args[6] if len(args) > 6 else kwargs.get("structure_keys", "unset"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(offline, "split_and_score", spy)
+    frames, _, _ = scene(duration=6.0, wall_points=200)
+    detect_offline(frames)
+    assert len(seen) == 1 and seen[0] is None
+
+
 def test_drone_free_scene_reports_nothing(scene):
     frames, _, _ = scene(duration=8.0, drone=False, wall_points=400)
     res = detect_offline(frames)
