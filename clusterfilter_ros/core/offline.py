@@ -222,19 +222,24 @@ def select_trimmed(
     scores: ClusterScores,
     selected: list[int],
     params: ParamSet,
+    was_split: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[int], np.ndarray]:
     """Selected clusters plus the qualifying candidates that :func:`select_clusters` left
     out for overlapping a selected one in time, each trimmed to its points outside the
     time spans already taken, if those still hold ``min_cluster_points`` points over at
-    least ``min_track_seconds`` (the confirmation a whole track needs). A cluster takes
-    the time where it has returns (within its span in ``scores``), not the gaps of more
+    least ``min_track_seconds`` (the confirmation a whole track needs), or over
+    ``split_rest_seconds`` for a piece of a split cluster (``was_split`` marks their
+    points), which qualified as a whole. A cluster takes the time where it has returns
+    (within its span in ``scores``), not the gaps of more
     than ``link_max_gap`` between them: a hovering drone's cluster joins co-located
     pieces seconds apart, and the piece of the drone split from a bird that passed it
     in such a gap fills the gap (deviation 64).
 
     Where a bird flies past the drone, the kinematic split (deviation 34) can end one
     drone track and start the next in the middle of the other: the later, better track
-    is selected and the earlier one, seconds of drone before the swap, was dropped.
+    is selected and the earlier one, seconds of drone before the swap, was dropped; or
+    the earlier one is selected, goes on along the bird, and the drone's next piece is
+    left with a rest of 2-4 s (deviation 79).
     Returns (labels with the trimmed points set to -1, selected clusters best first,
     mask of the trimmed points).
     """
@@ -261,7 +266,10 @@ def select_trimmed(
         for first, last in spans:
             covered |= (t[member] >= first) & (t[member] <= last)
         rest = member[~covered]
-        if rest.size < params.min_cluster_points or np.ptp(t[rest]) < params.min_track_seconds:
+        need = params.min_track_seconds
+        if was_split is not None and was_split[member].all():
+            need = min(need, params.split_rest_seconds)  # deviation 79
+        if rest.size < params.min_cluster_points or np.ptp(t[rest]) < need:
             continue
         labels[member[covered]] = -1
         trimmed[member[covered]] = True
@@ -554,7 +562,7 @@ def detect_offline(
         was_split = cut if was_split is None else was_split | cut
     spans = tracked_spans(labels, xyz, t, scores, params)
     whole = select_clusters(spans, params)
-    labels, selected, trimmed = select_trimmed(labels, t, spans, whole, params)
+    labels, selected, trimmed = select_trimmed(labels, t, spans, whole, params, was_split)
     selected = reachable_pieces(
         labels, xyz, t, selected, params, frozenset(selected) - frozenset(whole)
     )

@@ -908,6 +908,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=600.0,
     ),
     ParamSpec(
+        "split_rest_seconds",
+        "float",
+        2.0,
+        "Offline: a qualifying piece of a split cluster that overlaps a selected track in "
+        "time is kept for its returns outside the selected spans if those last at least "
+        "this long (s; where a bird took the drone's track over, the drone's next piece "
+        "starts while the old track still runs); any other such candidate needs "
+        "min_track_seconds.",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
         "stream_min_track_seconds",
         "float",
         0.0,

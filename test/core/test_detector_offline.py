@@ -147,6 +147,19 @@ def test_a_trimmed_rest_must_be_a_confirmed_track_and_paper_mode_keeps_one():
     assert chosen == [1] and not trimmed.any()
 
 
+def test_a_piece_of_a_split_cluster_needs_only_split_rest_seconds_of_rest():
+    labels, t, scores, params = _two_overlapping_tracks()
+    # Cluster 0's rest (0-8 s) is shorter than a 9 s confirmation...
+    p = params.copy(min_track_seconds=9.0, split_rest_seconds=5.0)
+    split = np.ones(t.size, dtype=bool)
+    for was_split, kept in ((None, False), (split, True), (labels == 1, False)):
+        out, chosen, trimmed = select_trimmed(labels, t, scores, [1], p, was_split)
+        # ...but a piece of a split cluster needs only split_rest_seconds.
+        assert (chosen == [1, 0]) is kept and bool(trimmed.any()) is kept
+    out, chosen, _ = select_trimmed(labels, t, scores, [1], p.copy(split_rest_seconds=8.5), split)
+    assert chosen == [1]  # 8 s of rest is shorter than that too
+
+
 def test_a_confident_piece_in_a_gap_of_the_selected_cluster_is_kept():
     # Cluster 1: a hovering drone's co-located pieces 0-4 s and 12-16 s, one cluster;
     # cluster 0: the drone in between, split off a bird that passed it (hover seed 1705).
