@@ -432,20 +432,25 @@ def _wall(rng: np.random.Generator, n: int = 400) -> np.ndarray:
 
 
 def _hover_frames(
-    duration: float = 30.0, thin_after: float = 15.0, strays_at: float | None = None
+    duration: float = 30.0,
+    thin_after: float = 15.0,
+    strays_at: float | None = None,
+    thin_period: float = 0.7,
+    thin_returns: int = 3,
 ) -> list[Frame]:
-    """Mid360 frames of a wall and a drone hovering at one spot, seen every 0.5 s (20
-    frames in the 10 s history), every 0.7 s after ``thin_after`` (14-15 frames); with
-    ``strays_at``, a bird passing 2.5-3 m from the drone leaves a return in each of the
-    three frames from then on."""
+    """Mid360 frames of a wall and a drone hovering at one spot, three returns every 0.5 s
+    (20 frames in the 10 s history), after ``thin_after`` ``thin_returns`` every
+    ``thin_period`` s (0.7: 14-15 frames); with ``strays_at``, a bird passing 2.5-3 m
+    from the drone leaves a return in each of the three frames from then on."""
     rng = np.random.default_rng(0)
     frames, next_hit = [], 0.0
     for i in range(int(duration * 10)):
         t = i * 0.1
         parts = [_wall(rng)]
         if t >= next_hit - 1e-9:
-            parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, 0.05, (3, 3)))
-            next_hit += 0.5 if t < thin_after else 0.7
+            n = 3 if t < thin_after else thin_returns
+            parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, 0.05, (n, 3)))
+            next_hit += 0.5 if t < thin_after else thin_period
         if strays_at is not None and 0 <= i - round(strays_at * 10) < 3:
             k = i - round(strays_at * 10)
             parts.append(np.array([[12.0 - 2.0 + 0.3 * k, 6.0 + 1.8, 15.0 + 0.8]]))
@@ -493,21 +498,10 @@ def test_a_slow_track_takes_a_return_after_a_long_gap_within_reacquire_window():
     assert det._track[-1].t == times[-1]  # beyond the window
 
 
-def _sparse_hover_frames(duration: float = 40.0, sparse_after: float = 15.0) -> list[Frame]:
-    """Mid360 frames of a wall and a drone hovering at one spot: three returns every
-    0.5 s, then from ``sparse_after`` one return every 0.9 s (too few for a cluster once
-    the denser returns have left the 10 s history)."""
-    rng = np.random.default_rng(0)
-    frames, next_hit = [], 0.0
-    for i in range(int(duration * 10)):
-        t = i * 0.1
-        parts = [_wall(rng)]
-        if t >= next_hit - 1e-9:
-            n = 3 if t < sparse_after else 1
-            parts.append(np.array([12.0, 6.0, 15.0]) + rng.normal(0, 0.05, (n, 3)))
-            next_hit += 0.5 if t < sparse_after else 0.9
-        frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
-    return frames
+def _sparse_hover_frames() -> list[Frame]:
+    """40 s of a hovering drone whose returns thin to one every 0.9 s from 15 s (too few
+    for a cluster once the denser returns have left the 10 s history)."""
+    return _hover_frames(40.0, 15.0, thin_period=0.9, thin_returns=1)
 
 
 def test_a_hovering_drone_too_sparse_to_cluster_stays_reported_for_hover_coast_seconds():
