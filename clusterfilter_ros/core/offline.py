@@ -230,10 +230,10 @@ def select_trimmed(
     least ``min_track_seconds`` (the confirmation a whole track needs), or over
     ``split_rest_seconds`` for a piece of a split cluster (``was_split`` marks their
     points), which qualified as a whole. A cluster takes the time where it has returns
-    (within its span in ``scores``), not the gaps of more
-    than ``link_max_gap`` between them: a hovering drone's cluster joins co-located
-    pieces seconds apart, and the piece of the drone split from a bird that passed it
-    in such a gap fills the gap (deviation 64).
+    (within its span in ``scores``), not the gaps of more than ``link_max_gap`` between
+    them: a hovering drone's cluster joins co-located pieces seconds apart, and the
+    piece of the drone split from a bird that passed it in such a gap fills the gap
+    (deviation 64).
 
     Where a bird flies past the drone, the kinematic split (deviation 34) can end one
     drone track and start the next in the middle of the other: the later, better track
