@@ -29,6 +29,10 @@ can stay in the history, and selected, for seconds after the drone has moved on.
 
     .venv/bin/python benchmarks/diagnose_losses.py --mode stream --seeds 0 1 2 3 4 5 \
         --scenarios default takeoff_landing flyover fast_pass hover avia_only
+
+``--phase`` (stream) prefixes each cause with "[acquiring]" (before the run's first hit:
+the drone not yet reported) or "[after the first hit]" (a reported drone lost, or a new
+appearance of it to acquire again).
 """
 
 from __future__ import annotations
@@ -242,8 +246,11 @@ def _recording_scores(record):
         streaming.split_and_score = original_split
 
 
-def stream_miss_reasons(sim, params) -> Counter:
-    """Streaming: the cause of every observable ground-truth sample without a hit."""
+def stream_miss_reasons(sim, params, phase: bool = False) -> Counter:
+    """Streaming: the cause of every observable ground-truth sample without a hit; with
+    ``phase``, each cause prefixed by whether the sample came before the run's first hit
+    ("acquiring": the drone not yet reported) or after it ("after the first hit": a
+    reported drone lost, or a new appearance of it)."""
     gt = sim.sequence.ground_truth
     reasons: Counter = Counter()
     if gt is None or len(gt) == 0:
@@ -315,17 +322,22 @@ def stream_miss_reasons(sim, params) -> Counter:
     obs = observable_mask(gt.stamps, drone_hit_stamps(sim), window=1.0)
     stamps = np.asarray(stamps)
     log_t = np.array([t for t, _ in log])
+    hits = gt.stamps[obs & hit]
+    first_hit = float(hits.min()) if hits.size else np.inf
     for g in np.nonzero(obs & ~hit)[0]:
         s = gt.stamps[g]
         i = int(np.searchsorted(stamps, s, side="right")) - 1
         state = states[i] if i >= 0 else ""
         if state == "reported":
-            reasons["another object reported, or the estimate > 2 m off"] += 1
+            cause = "another object reported, or the estimate > 2 m off"
         elif state:
-            reasons[state] += 1
+            cause = state
         else:
             k = int(np.searchsorted(log_t, s, side="right")) - 1
-            reasons[log[k][1] if k >= 0 else "before any cluster was scored (run start)"] += 1
+            cause = log[k][1] if k >= 0 else "before any cluster was scored (run start)"
+        if phase:
+            cause = ("[acquiring] " if s < first_hit else "[after the first hit] ") + cause
+        reasons[cause] += 1
     reasons["_observable"] = int(obs.sum())
     reasons["_hit"] = int((obs & hit).sum())
     return reasons
@@ -340,6 +352,11 @@ def main(argv=None) -> int:
     ap.add_argument("--clusters", action="store_true", help="print drone clusters' features")
     ap.add_argument("--duration", type=float, help="simulate this many seconds (default: all)")
     ap.add_argument("--mode", choices=("offline", "stream"), default="offline")
+    ap.add_argument(
+        "--phase",
+        action="store_true",
+        help="stream: split the misses into those before the run's first hit and after",
+    )
     args = ap.parse_args(argv)
     values = parse_assignments(args.param)
     total: Counter = Counter()
@@ -348,7 +365,7 @@ def main(argv=None) -> int:
             sim = load_sim(scenario, seed, args.cache, args.duration)
             params = sim_params(sim, values)
             if args.mode == "stream":
-                reasons = stream_miss_reasons(sim, params)
+                reasons = stream_miss_reasons(sim, params, args.phase)
                 total.update(reasons)
                 obs, hit = reasons.pop("_observable", 0), reasons.pop("_hit", 0)
                 print(f"{scenario} s{seed} (stream): observable GT {obs}, hit {hit}")

@@ -52,3 +52,21 @@ def test_stream_mode_accounts_for_every_observable_sample(tmp_path, capsys, benc
     from clusterfilter_ros.core import scoring, streaming
 
     assert streaming.score_clusters is scoring.score_clusters
+
+
+def test_stream_phases_split_the_same_misses(tmp_path, capsys, benchmark_module):
+    diagnose = benchmark_module("diagnose_losses")
+    argv = ["--mode", "stream", "--scenarios", "default", "--seeds", "0", "--duration", "8"]
+    argv += ["--cache", str(tmp_path)]
+    assert diagnose.main(argv) == 0
+    plain = re.findall(r"^\s+(\d+)\s+[\d.]+% (.+)$", capsys.readouterr().out, re.M)
+    assert diagnose.main(argv + ["--phase"]) == 0
+    split = re.findall(r"^\s+(\d+)\s+[\d.]+% (.+)$", capsys.readouterr().out, re.M)
+    by_cause = {}
+    for n, name in split:
+        prefix, _, cause = name.partition("] ")
+        assert prefix in ("[acquiring", "[after the first hit"), name
+        if cause.startswith("before any cluster was scored"):
+            assert prefix == "[acquiring", name  # the warm-up comes before any hit
+        by_cause[cause] = by_cause.get(cause, 0) + int(n)
+    assert by_cause == {name: int(n) for n, name in plain}
