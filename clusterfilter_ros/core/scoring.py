@@ -98,9 +98,12 @@ class ClusterScores:
 
 
 def select_and_append(
-    scores: ClusterScores, keep: np.ndarray, more: ClusterScores
+    scores: ClusterScores, keep: np.ndarray, more: ClusterScores | None = None
 ) -> ClusterScores:
-    """The clusters ``keep`` of ``scores`` (in that order), followed by those of ``more``."""
+    """The clusters ``keep`` of ``scores`` (in that order), followed by those of ``more``
+    (if given)."""
+    if more is None:
+        return ClusterScores(**{f.name: getattr(scores, f.name)[keep] for f in fields(scores)})
     return ClusterScores(
         **{
             f.name: np.concatenate([getattr(scores, f.name)[keep], getattr(more, f.name)])

@@ -319,14 +319,13 @@ def split_and_score(
     if not better:
         return out, k, pieces, was_split
     take = np.isin(labels, better)
-    mixed = np.where(take, alt + k, out)
-    mixed, k_mixed = relabel_compact(mixed)
-    return (
-        mixed,
-        k_mixed,
-        score_pieces(labels, mixed, k_mixed, was_split, xyz, t, scores, params, score),
-        was_split,
-    )
+    mixed, k_mixed = relabel_compact(np.where(take, alt + k, out))
+    # Pieces are scored alone, so the mixed split's scores are rows of the two already
+    # made: compacting keeps the order by value, the labels of ``out`` before ``alt``'s.
+    from_out = np.unique(out[~take & (out >= 0)])
+    from_alt = np.unique(alt[take])
+    mixed_scores = select_and_append(pieces, from_out, select_and_append(alt_pieces, from_alt))
+    return mixed, k_mixed, mixed_scores, was_split
 
 
 def _reportable_rank(scores: ClusterScores, params: ParamSet) -> np.ndarray:

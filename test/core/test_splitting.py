@@ -152,10 +152,23 @@ def test_two_trackers_keep_the_split_whose_best_piece_ranks_higher(monkeypatch, 
         return whole if cascade == cascade_better else cut
 
     monkeypatch.setattr(splitting, "kinematic_tracks", tracks)
-    out, k, pieces, _ = split_and_score(labels, xyz, t, scores, params, score, two_trackers=True)
+    # A lone object far away stays whole and keeps its scores ahead of the pieces.
+    lone_t = np.repeat(np.arange(0.0, 8.0, 0.1), 3)
+    xyz = np.vstack([xyz, _drone(lone_t) + np.array([0.0, 200.0, 0.0])])
+    t = np.concatenate([t, lone_t])
+    labels = np.concatenate([labels, np.ones(lone_t.size, np.int64)])
+    drone = np.concatenate([drone, np.zeros(lone_t.size, dtype=bool)])
+    scores = score(labels, xyz, t, params, n_clusters=2)
+    out, k, pieces, split = split_and_score(
+        labels, xyz, t, scores, params, score, two_trackers=True
+    )
     assert np.unique(out[drone]).size == 1
     (best,) = np.unique(out[drone])
     assert pieces.confidence[best] >= params.min_confidence
+    # The scores returned are those of scoring the chosen split's pieces again.
+    again = splitting.score_pieces(labels, out, k, split, xyz, t, scores, params, score)
+    for f in dataclasses.fields(again):
+        assert np.array_equal(getattr(pieces, f.name), getattr(again, f.name)), f.name
     single, _, _, _ = split_and_score(labels, xyz, t, scores, params, score)
     assert np.unique(single[drone]).size == (1 if not cascade_better else 4)
 
