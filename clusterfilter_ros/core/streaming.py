@@ -561,8 +561,8 @@ class StreamingDetector:
             self._drop_static_from_history()
         old_track = list(self._track)
         old_conf = self._selected_conf
-        old_velocity = None
-        if old_track and old_conf >= self.params.min_confidence:
+        old_velocity = None  # only needed when nothing was chosen (deviation 77)
+        if choice.samples is None and old_track and old_conf >= self.params.min_confidence:
             old_velocity = self._track_state()[2]
         self._track.clear()
         self._selected_conf = 0.0
