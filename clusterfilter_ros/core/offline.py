@@ -401,6 +401,61 @@ def reachable_pieces(
     return [c for c in selected if c in taken]
 
 
+def continuing_pieces(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    was_split: np.ndarray,
+    params: ParamSet,
+) -> list[int]:
+    """Pieces of split clusters that continue a selected piece although they fall short
+    of ``min_confidence`` (deviation 80): a candidate with at least ``keep_confidence``,
+    made only of split points (``was_split``), overlapping no selected piece in time,
+    that starts at most ``extend_max_gap`` after the end of the selected piece before it
+    (or ends at most that long before the start of the one after it; the gap a track's
+    growth crosses) where one flight could go on (:func:`_joinable`). Where the
+    kinematic split cut the drone's track at a bird's crossing, the drone's next piece,
+    seconds long and alone, is often just below ``min_confidence``; streaming keeps such
+    a continuation by its hysteresis (``keep_confidence``). Only the selected pieces
+    are neighbours (no chains of weak pieces); the weak ones are taken best first, each
+    in time no piece holds yet. Returns the pieces to add, after the selected ones."""
+    weak = (
+        scores.candidate
+        & (scores.confidence >= params.keep_confidence)
+        & (scores.confidence < params.min_confidence)
+    )
+    if not selected or not weak.any():
+        return []
+    taken = []
+    for c in selected:
+        member = labels == c
+        if member.any():
+            taken.append(_piece_ends(c, t[member], xyz[member]))
+    gap = float(params.extend_max_gap)
+    added: list[int] = []
+    rank = scores.rank_score(params.scoring)
+    for c in np.flatnonzero(weak)[np.argsort(-rank[weak], kind="stable")]:
+        member = labels == c
+        if c in selected or not member.any() or not was_split[member].all():
+            continue
+        ends = _piece_ends(int(c), t[member], xyz[member])
+        if any(ends.first <= k.last and k.first <= ends.last for k in taken):
+            continue
+        neighbours = [k for k in taken if k.cluster in selected]
+        before = [k for k in neighbours if k.last < ends.first]
+        after = [k for k in neighbours if k.first > ends.last]
+        prev = max(before, key=lambda k: k.last) if before else None
+        nxt = min(after, key=lambda k: k.first) if after else None
+        if (
+            prev is not None and ends.first - prev.last <= gap and _joinable(prev, ends, params)
+        ) or (nxt is not None and nxt.first - ends.last <= gap and _joinable(ends, nxt, params)):
+            taken.append(ends)
+            added.append(int(c))
+    return added
+
+
 def extend_selected(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -566,6 +621,8 @@ def detect_offline(
     selected = reachable_pieces(
         labels, xyz, t, selected, params, frozenset(selected) - frozenset(whole)
     )
+    if was_split is not None:
+        selected += continuing_pieces(labels, xyz, t, scores, selected, was_split, params)
     rows = scores.rows()
     for row in rows:
         row["selected"] = float(int(row["cluster"]) in selected)
@@ -594,7 +651,13 @@ def detect_offline(
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(
         [
-            cluster_trajectory(t[labels == c], xyz[labels == c], scores.confidence[c], params)
+            cluster_trajectory(
+                t[labels == c],
+                xyz[labels == c],
+                # A continuing piece is reported as the track it continues (deviation 80).
+                max(float(scores.confidence[c]), float(params.min_confidence)),
+                params,
+            )
             for c in selected
         ],
         params.max_extrapolation,

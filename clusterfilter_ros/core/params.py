@@ -997,7 +997,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "Streaming: a track being reported stays reported after a re-clustering while the "
         "cluster continuing it (points within track_gate of its predicted position) has "
         "at least this confidence, though below min_confidence (hysteresis); values >= "
-        "min_confidence switch this off.",
+        "min_confidence switch this off. Offline: a piece of a split cluster with at least "
+        "this confidence that continues a selected track (within extend_max_gap of its end "
+        "or start, where one flight could go on) joins it.",
         minimum=0.0,
         maximum=1.0,
     ),

@@ -8,6 +8,7 @@ import numpy as np
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.offline import (
+    continuing_pieces,
     detect_offline,
     occupied_spans,
     reachable_pieces,
@@ -182,6 +183,59 @@ def test_a_confident_piece_in_a_gap_of_the_selected_cluster_is_kept():
         labels, t, scores, selected, params.copy(link_max_gap=10.0)
     )
     assert chosen == [1] and not trimmed.any()
+
+
+def _drone_then_piece(start: float, offset: float = 0.0):
+    """A drone at 4 m/s along x, 20 m up, two returns per frame at 10 Hz: cluster 0 over
+    0-6 s (selected), cluster 1 from ``start`` to 10 s, ``offset`` m higher; cluster 2,
+    a third track far away. Scores: cluster 1 a candidate at 0.5 (below min_confidence,
+    above keep_confidence), the others qualifying."""
+    params = detector_params()
+    path = lambda t: np.column_stack([4.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])  # noqa: E731
+    t0 = np.repeat(np.arange(0.0, 6.0, 0.1), 2)
+    t1 = np.repeat(np.arange(start, 10.0, 0.1), 2)
+    t2 = np.repeat(np.arange(0.0, 10.0, 0.1), 2)
+    xyz = np.vstack([path(t0), path(t1) + [0.0, 0.0, offset], path(t2) + [0.0, 80.0, 0.0]])
+    t = np.concatenate([t0, t1, t2])
+    labels = np.repeat([0, 1, 2], [t0.size, t1.size, t2.size])
+    scores = score_clusters(labels, xyz, t, params, n_clusters=3)
+    scores = dataclasses.replace(
+        scores, candidate=np.ones(3, dtype=bool), confidence=np.array([0.9, 0.5, 0.8])
+    )
+    return labels, xyz, t, scores, params
+
+
+def test_a_weaker_split_piece_continuing_the_selected_track_joins_it():
+    labels, xyz, t, scores, params = _drone_then_piece(6.5)
+    split = labels == 1
+    assert continuing_pieces(labels, xyz, t, scores, [0], split, params) == [1]
+    # Not a piece of a split cluster, or split only in part: a weak track alone.
+    assert continuing_pieces(labels, xyz, t, scores, [0], np.zeros_like(split), params) == []
+    part = split & (t < 8.0)
+    assert continuing_pieces(labels, xyz, t, scores, [0], part, params) == []
+    # Below keep_confidence.
+    weaker = dataclasses.replace(scores, confidence=np.array([0.9, 0.2, 0.8]))
+    assert continuing_pieces(labels, xyz, t, weaker, [0], split, params) == []
+    # Only selected pieces are neighbours (cluster 2 is 80 m away anyway).
+    assert continuing_pieces(labels, xyz, t, scores, [2], split, params) == []
+    # It may also come before the selected piece.
+    swapped = dataclasses.replace(scores, confidence=np.array([0.5, 0.9, 0.8]))
+    assert continuing_pieces(labels, xyz, t, swapped, [1], labels == 0, params) == [0]
+
+
+def test_a_weaker_piece_after_a_long_gap_off_the_track_or_overlapping_is_not_added():
+    cases = {
+        "2 s after the track's end (extend_max_gap 1.5 s)": _drone_then_piece(8.0),
+        "starting 20 m above where the track went": _drone_then_piece(6.5, offset=20.0),
+        "overlapping the selected piece in time": _drone_then_piece(5.0),
+    }
+    for name, (labels, xyz, t, scores, params) in cases.items():
+        assert continuing_pieces(labels, xyz, t, scores, [0], labels == 1, params) == [], name
+    labels, xyz, t, scores, params = _drone_then_piece(6.5)
+    assert (
+        continuing_pieces(labels, xyz, t, scores, [0], labels == 1, params.copy(extend_max_gap=0.0))
+        == []
+    )
 
 
 def test_occupied_spans_break_at_gaps_over_the_limit():
