@@ -382,8 +382,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         0.5,
         "A cluster is taken for a hovering drone only if at most this share of its points "
         "lie in or next to (26 neighbours) a static_voxel of suppressed static structure: "
-        "the swaying edge of a tree crown is compact and seen in many frames too; 1 "
-        "switches this off.",
+        "the swaying edge of a tree crown is compact and seen in many frames too. "
+        "Streaming: nor does a fragment with a larger share continue a reported track "
+        "across a gap (reacquire_join). 1 switches both off.",
         minimum=0.0,
         maximum=1.0,
     ),

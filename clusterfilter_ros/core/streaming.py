@@ -61,7 +61,7 @@ from clusterfilter_ros.core.frame import Frame
 from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
-from clusterfilter_ros.core.scoring import score_clusters, select_clusters
+from clusterfilter_ros.core.scoring import score_clusters, select_clusters, structure_contact
 from clusterfilter_ros.core.splitting import split_and_score
 from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
 
@@ -1017,7 +1017,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             # fragment near where the track would be now began.
             c = _track_cluster(*snap.expected, labels, xyz, t, snap.now - p.track_window)
             if c is not None and c != best and scores.t_first[c] > scores.t_last[best]:
-                joined = _joined_track(best, c, labels, xyz, t, k, scorer, ps)
+                joined = _joined_track(best, c, labels, xyz, t, k, scorer, ps, structure)
                 if joined is not None:
                     return choice(joined[0], max(joined[1], float(p.min_confidence)), True, k)
         return choice(labels == best, float(scores.confidence[best]), True, k)
@@ -1043,7 +1043,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         t_last, position = snap.newest
         o = _track_cluster(position, p.track_gate, labels, xyz, t, t_last - p.track_window, t_last)
         if o is not None and o != c:
-            joined = _joined_track(o, c, labels, xyz, t, k, scorer, ps)
+            joined = _joined_track(o, c, labels, xyz, t, k, scorer, ps, structure)
             if joined is not None:
                 return choice(joined[0], float(p.min_confidence), False, k)
     sparse = scores.n_points[c] < ps.min_cluster_points
@@ -1183,6 +1183,7 @@ def _joined_track(
     k: int,
     scorer: Any,
     scoring: ParamSet,
+    structure: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float] | None:
     """Hysteresis across a gap (``reacquire_join``): a drone's first returns after a gap
     longer than the clusterer's linking form a cluster of their own (``c``, near where
@@ -1194,7 +1195,10 @@ def _joined_track(
     fragment must also start where the track was heading: the straight-line fit over the
     track's last ``track_window`` seconds, carried to the fragment's first return, within
     ``track_gate`` plus ``link_max_accel`` x gap^2 / 2 of the fragment's first
-    ``frame_period``."""
+    ``frame_period``, and (with the sorted ``structure`` keys of suppressed static
+    voxels) have at most ``hover_max_contact`` of its returns in or next to them: the
+    swaying edge of a tree crown beside where a drone turned away is no continuation of
+    its track (deviation 81)."""
     p = scoring
     track, fragment = labels == o, labels == c
     t_end, t_start = float(t[track].max()), float(t[fragment].min())
@@ -1208,6 +1212,14 @@ def _joined_track(
     ends = (t[end], xyz[end].astype(np.float64), np.ones(end.size))
     if not _reaches(*ends, t_end, t_start, first, p):
         return None
+    if structure is not None and structure.size and p.hover_max_contact < 1.0:
+        which = np.zeros(k, dtype=bool)
+        which[c] = True
+        contact = structure_contact(
+            labels[fragment], xyz[fragment], k, which, structure, p.static_voxel
+        )
+        if contact[c] > p.hover_max_contact:
+            return None
     joined = labels.copy()
     joined[labels == c] = o
     rescored = scorer(joined, xyz, t, params=scoring, n_clusters=k)

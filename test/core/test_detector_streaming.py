@@ -7,6 +7,7 @@ import threading
 import numpy as np
 import pytest
 
+from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
@@ -400,7 +401,6 @@ def test_persistence_map_is_the_same_with_one_hit_per_voxel_and_bin():
     # The detector records one hit per (voxel, static_bin) of a frame when the frame lies
     # in one bin; the map must equal one fed every point, also for frames whose points
     # straddle a bin boundary (per-point times).
-    from clusterfilter_ros.core import voxel
     from clusterfilter_ros.core.background import BackgroundGrid
 
     rng = np.random.default_rng(11)
@@ -649,9 +649,18 @@ def test_a_fragment_joins_the_track_only_where_it_was_heading_and_if_it_scores()
     def along(t: np.ndarray, side: float = 0.0) -> np.ndarray:
         return np.column_stack([10.0 + 8.0 * t, np.full(t.size, 5.0 + side), np.full(t.size, 20.0)])
 
-    def join(gap: float, side: float = 0.0, candidate: bool = True, confidence: float = 0.3):
+    def join(
+        gap: float,
+        side: float = 0.0,
+        candidate: bool = True,
+        confidence: float = 0.3,
+        structure: str | None = None,
+        params=p,
+    ):
         # The fragment (cluster 1): 0.5 s of returns from ``gap`` after the track's end,
-        # ``side`` metres off its line.
+        # ``side`` metres off its line; ``structure``: static voxels of suppressed
+        # structure 1 m "under" all its returns, or 1.5 m (one static_voxel) "behind" its
+        # first: those of its first two frames touch them (0.4 of its returns).
         t_frag = np.repeat(np.arange(0.0, 0.5, 0.1), 3) + t_end + gap
         t = np.concatenate([t_track, t_frag])
         xyz = np.vstack([along(t_track), along(t_frag, side)]).astype(np.float32)
@@ -662,7 +671,14 @@ def test_a_fragment_joins_the_track_only_where_it_was_heading_and_if_it_scores()
             scored.append(joined)
             return _Scores(n_clusters, candidate, confidence)
 
-        return _joined_track(0, 1, labels, xyz, t, 2, scorer, p), scored
+        frag = xyz[labels == 1].astype(np.float64)
+        static = {
+            None: None,
+            "under": frag - [0.0, 0.0, 1.0],
+            "behind": frag[:1] - [p.static_voxel, 0.0, 0.0],
+        }[structure]
+        keys = None if static is None else np.unique(voxel.voxel_keys(static, p.static_voxel))
+        return _joined_track(0, 1, labels, xyz, t, 2, scorer, params, keys), scored
 
     gap = 2.5
     joined, scored = join(gap)
@@ -674,6 +690,12 @@ def test_a_fragment_joins_the_track_only_where_it_was_heading_and_if_it_scores()
     assert join(p.reacquire_window + 0.2)[0] is None
     assert join(gap, candidate=False)[0] is None
     assert join(gap, confidence=p.keep_confidence - 0.01)[0] is None
+    # Returns in or next to suppressed structure (the swaying edge of a crown where the
+    # drone turned away, default seed 3204 of the thirty-first set): more than
+    # hover_max_contact of them, and it is not the track's continuation.
+    assert join(gap, structure="behind")[0] is not None
+    assert join(gap, structure="under")[0] is None
+    assert join(gap, structure="under", params=p.copy(hover_max_contact=1.0))[0] is not None
 
 
 # ------------------------------------------------------------ background re-clustering
