@@ -119,6 +119,9 @@ class _TrackFit:
     # The line's speed is below min_speed and within _STILL_SIGMAS standard errors of
     # zero: as far as its samples tell, the track is not moving (deviation 73).
     still: bool = False
+    # The samples span the two frame periods a velocity needs (_track_line): the slope is
+    # measured, not unknown (deviation 82).
+    measured: bool = True
 
 
 @dataclass(frozen=True)
@@ -745,16 +748,22 @@ class StreamingDetector:
         pred = self._predict(stamp, until=stamp + self.params.frame_period, hold_still=True)
         if pred is None:
             return None
-        position, n, age, velocity = pred
+        position, n, age, velocity, measured = pred
         speed = float(np.linalg.norm(velocity))
         p = self.params
-        limit = max(p.max_extrapolation, p.max_gap) if speed < p.min_speed else p.max_extrapolation
+        # A velocity measured as slow, not one unknown: the first returns after a pause
+        # longer than link_max_gap, all in one frame or two, tell nothing of the motion,
+        # and a pass 110 m out held where they were was 10 m off within a second
+        # (deviation 82).
+        slow = measured and speed < p.min_speed
+        limit = max(p.max_extrapolation, p.max_gap) if slow else p.max_extrapolation
         return (position, n) if age <= limit else None
 
     def _predict(
         self, stamp: float, until: float | None = None, hold_still: bool = False
-    ) -> tuple[np.ndarray, int, float, np.ndarray] | None:
-        """(position, points, age of the newest sample, velocity) at ``stamp`` from a weighted
+    ) -> tuple[np.ndarray, int, float, np.ndarray, bool] | None:
+        """(position, points, age of the newest sample, velocity, whether the samples span
+        the two frame periods a velocity needs) at ``stamp`` from a weighted
         fit over the samples up to ``until`` (default ``stamp``): the last track_window
         seconds of them (at least the last three), or None without such a sample. The
         age is negative when the newest sample is after ``stamp``. The fit is a straight
@@ -782,9 +791,9 @@ class StreamingDetector:
             x_last = min(x, fit.t_newest - fit.tc)
             at_last = coef[0] + coef[1] * x_last + coef[2] * x_last * x_last
             tangent = coef[1] + 2.0 * coef[2] * x_last
-            return at_last + tangent * (x - x_last), fit.points, age, fit.slope
+            return at_last + tangent * (x - x_last), fit.points, age, fit.slope, True
         at = last if hold_still and fit.still and age > 0.0 else stamp
-        return fit.mean + fit.slope * (at - fit.tc), fit.points, age, fit.slope
+        return fit.mean + fit.slope * (at - fit.tc), fit.points, age, fit.slope, fit.measured
 
     def _track_fit(self, samples: list[_TrackSample]) -> _TrackFit:
         """The fits :meth:`_predict` reads, through these samples; the last one is reused
@@ -811,8 +820,18 @@ class StreamingDetector:
             speed == 0.0
             or speed < _STILL_SIGMAS * _speed_standard_error(ts, ps, ws, (slope, mean, tc))
         )
+        measured = bool(ts[-1] - ts[0] >= 2 * p.frame_period)
         fit = _TrackFit(
-            tuple(samples), p, int(ws.sum()), slope, mean, tc, float(ts[-1]), quadratic, still
+            tuple(samples),
+            p,
+            int(ws.sum()),
+            slope,
+            mean,
+            tc,
+            float(ts[-1]),
+            quadratic,
+            still,
+            measured,
         )
         self._fit_cache = fit
         return fit
@@ -825,7 +844,7 @@ class StreamingDetector:
         pred = self._predict(stamp)
         if pred is None:
             return
-        predicted, _, age, velocity = pred
+        predicted, _, age, velocity, _ = pred
         limit = max(p.max_extrapolation, p.max_gap)
         if float(np.linalg.norm(velocity)) < p.min_speed:
             # A hovering drone seen once every second or two is still where it was.

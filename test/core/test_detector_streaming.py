@@ -233,6 +233,23 @@ def test_slow_track_coasts_through_a_gap_a_fast_one_does_not():
     assert _tracked(times, hover)._fit(times[-1] + 1.5) is None  # beyond max_gap
 
 
+def test_a_track_whose_motion_is_unknown_does_not_coast_like_a_slow_one():
+    # A pass 110 m out at 11 m/s (flyover seed 3103 of the thirtieth set): its first
+    # returns after 2.1 s without any (longer than link_max_gap) fall in one frame, and
+    # the line through them has no velocity. Held where they were, it was 10 m off
+    # within a second: it is reported for max_extrapolation, not max_gap.
+    times = [0.0, 0.3, 0.6, 2.7, 2.75]
+    path = [(-25.0 - 11.0 * t, -3.0, 92.5) for t in times]
+    det = _tracked(times, path)
+    assert det._fit(2.75 + 0.4) is not None
+    assert det._fit(2.75 + 0.8) is None
+    pred = det._predict(2.75 + 0.8)
+    assert not pred[4] and not pred[3].any()  # no velocity: unknown, not measured slow
+    # One more sample two frame periods on: the velocity is measured.
+    moving = _tracked([*times, 2.95], [*path, (-25.0 - 11.0 * 2.95, -3.0, 92.5)])
+    assert moving._predict(3.0)[4]
+
+
 def test_a_still_track_is_not_extrapolated_past_its_newest_sample():
     # A hovering drone seen in four frames over 0.9 s whose returns scatter so that
     # their line drifts at 0.23 m/s, below min_speed (1 m/s) and within three standard
