@@ -956,6 +956,8 @@ class StreamingDetector:
         do not support one."""
         p = self.params
         ts, ps, ws = piece.ts, piece.ps, piece.ws
+        keep = ~_stray_samples(ts, ps, p)  # deviation 83
+        ts, ps, ws = ts[keep], ps[keep], ws[keep]
         position = smoothed_position(ts, ps, ws, stamp, p)
         if position is None:
             return None
@@ -1245,6 +1247,32 @@ def _joined_track(
     if rescored.candidate[o] and rescored.confidence[o] >= scoring.keep_confidence:
         return joined == o, float(rescored.confidence[o])
     return None
+
+
+def _stray_samples(ts: np.ndarray, ps: np.ndarray, params: ParamSet) -> np.ndarray:
+    """(S,) bool: the samples (times ``ts`` ascending, positions ``ps``) that lie farther
+    than ``stray_distance`` plus ``link_max_accel`` x dt1 x dt2 / 2 (the most a drone
+    accelerating that hard strays from the chord) from the straight line between the
+    samples on either side of them, those at most ``link_max_gap`` apart: a lone return
+    of something else the track took between two of the drone's (deviation 83); of
+    neighbouring samples only the one that strays most. A track's first and last
+    samples are never strays here."""
+    out = np.zeros(ts.size, dtype=bool)
+    if ts.size < 3 or params.stray_distance <= 0:
+        return out
+    t0, t1, t2 = ts[:-2], ts[1:-1], ts[2:]
+    span = t2 - t0
+    ok = (span > 0) & (span <= params.link_max_gap)
+    frac = np.where(span > 0, (t1 - t0) / np.where(span > 0, span, 1.0), 0.5)
+    between = ps[:-2] + frac[:, None] * (ps[2:] - ps[:-2])
+    off = np.linalg.norm(ps[1:-1] - between, axis=1)
+    allow = params.stray_distance + 0.5 * params.link_max_accel * (t1 - t0) * (t2 - t1)
+    # A stray moves the chords its neighbours are judged by, too: only the sample that
+    # strays most among its neighbours is taken for one.
+    excess = np.zeros(ts.size)
+    excess[1:-1] = np.where(ok, off / allow, 0.0)
+    out[1:-1] = (excess[1:-1] > 1.0) & (excess[1:-1] >= excess[:-2]) & (excess[1:-1] >= excess[2:])
+    return out
 
 
 def smoothed_position(

@@ -437,3 +437,28 @@ def test_live_run_seconds_finds_the_run_after_a_stamp():
     det._now = 3.5  # the second run may still go on
     assert det._live_run_seconds(1.5) == np.inf
     assert det._live_run_seconds(0.5) == 1.0
+
+
+def test_a_lone_stray_sample_is_left_out_of_the_delayed_estimate():
+    from clusterfilter_ros.core.streaming import _stray_samples, _TrackPiece
+
+    p = detector_params({"report_lag": 3.0})
+    # A pass at 6 m/s, a sample every 0.2 s, and at 1.1 s one 8 m off its line (a return
+    # of something else the track took; flyover seed 3201 of the thirty-first set).
+    ts = np.round(np.arange(0.0, 2.01, 0.2), 6)
+    ps = np.column_stack([6.0 * ts, np.zeros(ts.size), np.full(ts.size, 40.0)])
+    ts = np.insert(ts, 6, 1.1)
+    ps = np.insert(ps, 6, [6.6 - 6.0, 5.0, 35.0], axis=0)
+    stray = _stray_samples(ts, ps, p)
+    assert stray.tolist() == [i == 6 for i in range(ts.size)]
+    # A sample 1 m off (within stray_distance) stays, and so do the ends.
+    near = ps.copy()
+    near[6] = [6.6, 1.0, 40.0]
+    assert not _stray_samples(ts, near, p).any()
+    ends = ps.copy()
+    ends[[0, -1]] += [0.0, 8.0, 0.0]
+    assert not _stray_samples(ts, ends, p)[[0, -1]].any()
+    det = StreamingDetector(p)
+    piece = _TrackPiece(ts, ps, np.full(ts.size, 3.0), 0.9)
+    est = det._delayed_estimate(1.1, piece)
+    assert est is not None and np.linalg.norm(est.position - [6.6, 0.0, 40.0]) < 0.3
