@@ -961,7 +961,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         2.0,
         "Offline trajectory: returns of the selected clusters farther than this (m) from "
         "the fitted track are left out and the track fitted again (another object's "
-        "returns joined to the drone's); 0 switches this off.",
+        "returns joined to the drone's). Delayed output (report_lag): a track sample "
+        "farther than this (plus link_max_accel x dt1 x dt2 / 2) from the chord between "
+        "its neighbours is left out of the fit. 0 switches both off.",
         minimum=0.0,
         maximum=100.0,
     ),
