@@ -428,11 +428,12 @@ def continuing_pieces(
     )
     if not selected or not weak.any():
         return []
-    taken = []
+    neighbours = []
     for c in selected:
         member = labels == c
         if member.any():
-            taken.append(_piece_ends(c, t[member], xyz[member]))
+            neighbours.append(_piece_ends(c, t[member], xyz[member]))
+    taken = list(neighbours)  # and the weak pieces added
     gap = float(params.extend_max_gap)
     added: list[int] = []
     rank = scores.rank_score(params.scoring)
@@ -443,7 +444,6 @@ def continuing_pieces(
         ends = _piece_ends(int(c), t[member], xyz[member])
         if any(ends.first <= k.last and k.first <= ends.last for k in taken):
             continue
-        neighbours = [k for k in taken if k.cluster in selected]
         before = [k for k in neighbours if k.last < ends.first]
         after = [k for k in neighbours if k.first > ends.last]
         prev = max(before, key=lambda k: k.last) if before else None

@@ -920,8 +920,10 @@ class StreamingDetector:
         """The tracks delayed estimates come from, in order of preference: the current
         track while it is confident, then the kept pieces newest first (a track cut off
         by a later re-clustering, or lost); each preceded by the older
-        pieces it continues (:func:`_continues`). A kept piece serves only frames up to
-        the newest stamp at which the live output reported a position on it."""
+        pieces it continues (:func:`_continues`), and without its lone stray samples
+        (:func:`_stray_samples`, once here for all the frames released together). A kept
+        piece serves only frames up to the newest stamp at which the live output reported
+        a position on it."""
         p = self.params
         self._prune_archive()
         pieces = list(self._archive)
@@ -948,7 +950,7 @@ class StreamingDetector:
                     chain.confidence,
                     max(chain.reported_until, piece.reported_until),
                 )
-            chains.append(chain)
+            chains.append(_without_strays(chain, p))
         return chains
 
     def _delayed_estimate(self, stamp: float, piece: _TrackPiece) -> Estimate | None:
@@ -956,8 +958,6 @@ class StreamingDetector:
         do not support one."""
         p = self.params
         ts, ps, ws = piece.ts, piece.ps, piece.ws
-        keep = ~_stray_samples(ts, ps, p)  # deviation 83
-        ts, ps, ws = ts[keep], ps[keep], ws[keep]
         position = smoothed_position(ts, ps, ws, stamp, p)
         if position is None:
             return None
@@ -1273,6 +1273,14 @@ def _stray_samples(ts: np.ndarray, ps: np.ndarray, params: ParamSet) -> np.ndarr
     excess[1:-1] = np.where(ok, off / allow, 0.0)
     out[1:-1] = (excess[1:-1] > 1.0) & (excess[1:-1] >= excess[:-2]) & (excess[1:-1] >= excess[2:])
     return out
+
+
+def _without_strays(piece: _TrackPiece, params: ParamSet) -> _TrackPiece:
+    """``piece`` without its :func:`_stray_samples` (deviation 83)."""
+    keep = ~_stray_samples(piece.ts, piece.ps, params)
+    if keep.all():
+        return piece
+    return dataclasses.replace(piece, ts=piece.ts[keep], ps=piece.ps[keep], ws=piece.ws[keep])
 
 
 def smoothed_position(

@@ -440,7 +440,7 @@ def test_live_run_seconds_finds_the_run_after_a_stamp():
 
 
 def test_a_lone_stray_sample_is_left_out_of_the_delayed_estimate():
-    from clusterfilter_ros.core.streaming import _stray_samples, _TrackPiece
+    from clusterfilter_ros.core.streaming import _stray_samples, _TrackPiece, _without_strays
 
     p = detector_params({"report_lag": 3.0})
     # A pass at 6 m/s, a sample every 0.2 s, and at 1.1 s one 8 m off its line (a return
@@ -459,6 +459,7 @@ def test_a_lone_stray_sample_is_left_out_of_the_delayed_estimate():
     ends[[0, -1]] += [0.0, 8.0, 0.0]
     assert not _stray_samples(ts, ends, p)[[0, -1]].any()
     det = StreamingDetector(p)
-    piece = _TrackPiece(ts, ps, np.full(ts.size, 3.0), 0.9)
+    piece = _without_strays(_TrackPiece(ts, ps, np.full(ts.size, 3.0), 0.9), p)
+    assert piece.ts.size == ts.size - 1 and 1.1 not in piece.ts
     est = det._delayed_estimate(1.1, piece)
     assert est is not None and np.linalg.norm(est.position - [6.6, 0.0, 40.0]) < 0.3
