@@ -102,14 +102,12 @@ def select_and_append(
 ) -> ClusterScores:
     """The clusters ``keep`` of ``scores`` (in that order), followed by those of ``more``
     (if given)."""
-    if more is None:
-        return ClusterScores(**{f.name: getattr(scores, f.name)[keep] for f in fields(scores)})
-    return ClusterScores(
-        **{
-            f.name: np.concatenate([getattr(scores, f.name)[keep], getattr(more, f.name)])
-            for f in fields(ClusterScores)
-        }
-    )
+
+    def column(name: str) -> np.ndarray:
+        kept = getattr(scores, name)[keep]
+        return kept if more is None else np.concatenate([kept, getattr(more, name)])
+
+    return ClusterScores(**{f.name: column(f.name) for f in fields(ClusterScores)})
 
 
 def _empty(k: int) -> ClusterScores:
