@@ -1296,14 +1296,19 @@ def smoothed_position(
     (at least the four nearest within ``link_max_gap``, so that a sparse track is not read
     as standing still): a weighted quadratic where ``stamp`` lies among at least 6 samples
     spanning 0.6 s and the fitted acceleration is at most ``max_accel``, else a weighted
-    straight line (no velocity over less than two frame periods)."""
+    straight line (no velocity over less than two frame periods; beside a gap of at most
+    ``link_max_gap``, such samples take the velocity of the chord across the gap)."""
     p = params
     n = ts.size
     if n == 0 or not ts[0] - p.max_extrapolation <= stamp <= ts[-1] + p.max_extrapolation:
         return None
     k = int(np.searchsorted(ts, stamp))
+    across = None  # the velocity of the chord across a gap, where one side may need it
     if 0 < k < n and ts[k] - ts[k - 1] > p.max_gap:
         # Inside a gap too long to bridge: only near one of its ends, from that side.
+        gap = float(ts[k] - ts[k - 1])
+        if gap <= p.link_max_gap:
+            across = (ps[k] - ps[k - 1]) / gap
         if stamp - ts[k - 1] <= p.max_extrapolation:
             ts, ps, ws = ts[:k], ps[:k], ws[:k]
         elif ts[k] - stamp <= p.max_extrapolation:
@@ -1326,6 +1331,10 @@ def smoothed_position(
             x = stamp - tc
             return coef[0] + coef[1] * x + coef[2] * x * x
     slope, mean, tc = _track_line(tt, pp, ww, p)
+    if across is not None and tt[-1] - tt[0] < 2 * p.frame_period:
+        # The first returns after a pause, all within a frame or two, have no velocity of
+        # their own, and held still a pass 110 m out was 2-5 m off (deviation 84).
+        slope = across
     return mean + slope * (stamp - tc)
 
 

@@ -371,6 +371,23 @@ def test_inside_a_long_gap_only_near_its_ends():
     assert smoothed_position(ts[:0], ps[:0], w[:0], 1.0, P) is None
 
 
+def test_the_first_returns_after_a_pause_take_the_velocity_across_it():
+    # A pass at 2.2 m/s; 1.5 s without returns (longer than max_gap 1 s, within
+    # link_max_gap 2 s), then two samples 0.05 s apart: no velocity of their own.
+    ts = np.concatenate([np.arange(0.0, 2.01, 0.1), [3.5, 3.55]])
+    ps = _line(ts)
+    w = np.ones(ts.size)
+    for stamp in (3.1, 3.6, 3.9):
+        np.testing.assert_allclose(
+            smoothed_position(ts, ps, w, stamp, P), _line(np.array([stamp]))[0], atol=1e-9
+        )
+    # Across a pause longer than link_max_gap nothing says where the object went
+    # meanwhile: the samples are where it was.
+    ts[-2:] += 1.0
+    got = smoothed_position(ts, _line(ts), w, 4.2, P)
+    np.testing.assert_allclose(got, _line(ts[-2:]).mean(axis=0), atol=1e-9)
+
+
 def test_a_sparse_track_is_not_read_as_standing_still():
     # One sample every 0.5 s at 8 m/s: only one lies within 0.4 s past the last; the
     # four nearest give the velocity.
