@@ -174,6 +174,24 @@ def _track_line(
     return slope, mean, tc
 
 
+def _facing_lines(
+    earlier: _TrackPiece, later: _TrackPiece, params: ParamSet
+) -> list[tuple[np.ndarray, np.ndarray, float, bool]]:
+    """The straight-line fits (:func:`_track_line`) over ``track_window`` at the facing
+    ends of ``earlier`` and ``later``: (velocity, mean position, mean time, whether the
+    velocity was measured: samples spanning two frame periods), earlier's first."""
+    p = params
+    lines = []
+    for piece, near in (
+        (earlier, earlier.ts >= earlier.ts[-1] - p.track_window),
+        (later, later.ts <= later.ts[0] + p.track_window),
+    ):
+        ts = piece.ts[near]
+        slope, mean, tc = _track_line(ts, piece.ps[near], piece.ws[near], p)
+        lines.append((slope, mean, tc, bool(ts[-1] - ts[0] >= 2 * p.frame_period)))
+    return lines
+
+
 def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bool:
     """Whether ``later`` (starting after ``earlier`` ends) continues the same object: at
     most ``link_max_gap`` after it, and the two straight-line fits over ``track_window``
@@ -184,15 +202,31 @@ def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bo
     if not 0.0 <= gap <= p.link_max_gap:
         return False
     middle = earlier.ts[-1] + 0.5 * gap
-    ends = []
-    for piece, near in (
-        (earlier, earlier.ts >= earlier.ts[-1] - p.track_window),
-        (later, later.ts <= later.ts[0] + p.track_window),
-    ):
-        slope, mean, tc = _track_line(piece.ts[near], piece.ps[near], piece.ws[near], p)
-        ends.append(mean + slope * (middle - tc))
+    ends = [mean + slope * (middle - tc) for slope, mean, tc, _ in _facing_lines(earlier, later, p)]
     reach = p.track_gate + 0.5 * p.link_max_accel * (0.5 * gap) ** 2
     return float(np.linalg.norm(ends[0] - ends[1])) <= reach
+
+
+def _could_continue(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bool:
+    """Whether one object could have left ``earlier`` and begun ``later``, however long
+    the gap between them: the lines at their facing ends (:func:`_facing_lines`) meet in
+    the middle of the gap within ``track_gate`` plus half ``link_max_accel`` times the
+    squared half gap, as in :func:`_continues`; where only one end has a measured
+    velocity, its line carried across the whole gap must reach the other end within
+    ``track_gate`` plus half ``link_max_accel`` times the squared gap; with none, nothing
+    says otherwise (deviation 85)."""
+    p = params
+    (s0, m0, t0, v0), (s1, m1, t1, v1) = _facing_lines(earlier, later, p)
+    gap = float(later.ts[0] - earlier.ts[-1])
+    if v0 and v1:
+        at = float(earlier.ts[-1]) + 0.5 * gap
+        reach = p.track_gate + 0.5 * p.link_max_accel * (0.5 * gap) ** 2
+    elif v0 or v1:
+        at = float(later.ts[0]) if v0 else float(earlier.ts[-1])
+        reach = p.track_gate + 0.5 * p.link_max_accel * gap**2
+    else:
+        return True
+    return float(np.linalg.norm(m0 + s0 * (at - t0) - m1 - s1 * (at - t1))) <= reach
 
 
 def _recent_samples(
@@ -920,8 +954,9 @@ class StreamingDetector:
         """The tracks delayed estimates come from, in order of preference: the current
         track while it is confident, then the kept pieces newest first (a track cut off
         by a later re-clustering, or lost); each preceded by the older
-        pieces it continues (:func:`_continues`), and without its lone stray samples
-        (:func:`_stray_samples`, once here for all the frames released together). A kept
+        pieces it continues (:func:`_continues`), without samples of another object
+        before it (:meth:`_without_unreported_head`) and without its lone stray samples
+        (:func:`_stray_samples`; once here for all the frames released together). A kept
         piece serves only frames up to the newest stamp at which the live output reported
         a position on it."""
         p = self.params
@@ -950,8 +985,23 @@ class StreamingDetector:
                     chain.confidence,
                     max(chain.reported_until, piece.reported_until),
                 )
-            chains.append(_without_strays(chain, p))
+            chains.append(_without_strays(self._without_unreported_head(chain), p))
         return chains
+
+    def _without_unreported_head(self, chain: _TrackPiece) -> _TrackPiece:
+        """``chain`` without its samples before the newest gap longer than ``max_gap``
+        across which the object could not have gone on (:func:`_could_continue`) and
+        before which the live output never reported it (:meth:`_reported_until`): a
+        re-clustering's linking can join another object's earlier returns to the
+        drone's cluster, and the late output then reported them (deviation 85)."""
+        p = self.params
+        for k in np.flatnonzero(np.diff(chain.ts) > p.max_gap)[::-1] + 1:
+            earlier = _TrackPiece(chain.ts[:k], chain.ps[:k], chain.ws[:k], 0.0)
+            later = _TrackPiece(chain.ts[k:], chain.ps[k:], chain.ws[k:], 0.0)
+            if _could_continue(earlier, later, p) or self._reported_until(earlier) > -math.inf:
+                continue
+            return dataclasses.replace(chain, ts=later.ts, ps=later.ps, ws=later.ws)
+        return chain
 
     def _delayed_estimate(self, stamp: float, piece: _TrackPiece) -> Estimate | None:
         """The delayed estimate at ``stamp`` from one track's samples, or None where they

@@ -213,6 +213,45 @@ def test_a_piece_continues_the_same_object_not_another_one():
     assert not streaming._continues(drone, _piece(far, _line(far)), P)
 
 
+def test_could_continue_reads_a_velocity_only_where_one_was_measured():
+    ts = np.arange(0.0, 2.0, 0.1)
+    drone = _piece(ts, _line(ts))  # 2.2 m/s
+    later = np.arange(3.5, 5.0, 0.1)  # 1.5 s on
+    assert streaming._could_continue(drone, _piece(later, _line(later)), P)
+    assert not streaming._could_continue(drone, _piece(later, _line(later) + [0, 8.0, 0]), P)
+    # Still returns 8 m from where the drone appeared: neither line reaches the other.
+    still = _piece(ts, np.tile([0.0, -5.0, 10.0], (ts.size, 1)))
+    assert not streaming._could_continue(still, _piece(later, _line(later)), P)
+    # A lone sample before the gap has no velocity: the later line carried back to it.
+    lone = _piece(np.array([1.9]), _line(np.array([1.9])))
+    assert streaming._could_continue(lone, _piece(later, _line(later)), P)
+    assert not streaming._could_continue(
+        _piece(np.array([1.9]), _line(np.array([1.9])) + [0, 12.0, 0]),
+        _piece(later, _line(later)),
+        P,
+    )
+    # Two lone samples: nothing to tell.
+    assert streaming._could_continue(lone, _piece(np.array([3.5]), _line(np.array([3.5]))), P)
+
+
+def test_another_objects_returns_before_the_track_are_not_reported_late():
+    # A re-clustering linked 1 s of still returns 8 m off (a crown's edge) to the drone's
+    # track 1.9 s later; the live output never reported them.
+    head_t, drone_t = np.arange(0.0, 1.0, 0.1), np.arange(2.9, 5.0, 0.1)
+    head = np.tile([0.0, -5.0, 10.0], (head_t.size, 1))
+    ts = np.concatenate([head_t, drone_t])
+    chain = _piece(ts, np.concatenate([head, _line(drone_t)]), conf=0.8)
+    det = _detector_with([])
+    np.testing.assert_array_equal(det._without_unreported_head(chain).ts, drone_t)
+    # Reported live there: kept (the live output's own object).
+    det._live_reports.append((0.5, head[0]))
+    np.testing.assert_array_equal(det._without_unreported_head(chain).ts, ts)
+    # The drone's own earlier returns, on its line: kept.
+    det = _detector_with([])
+    own = _piece(ts, _line(ts), conf=0.8)
+    np.testing.assert_array_equal(det._without_unreported_head(own).ts, ts)
+
+
 def _detector_with(archive, track_t=None):
     # No live run length rule: these detectors have no record of live estimates.
     det = StreamingDetector(detector_params({"report_lag": 5.0, "report_lag_min_run": 0.0}))
