@@ -162,14 +162,20 @@ def _speed_standard_error(
     return math.sqrt(float(variance.sum()) / sxx)
 
 
+def _spans_velocity(ts: np.ndarray, params: ParamSet) -> bool:
+    """Whether samples at times ``ts`` (ascending) span the two frame periods a velocity
+    needs: over less, a fitted slope is the scatter of one or two frames' returns."""
+    return bool(ts[-1] - ts[0] >= 2 * params.frame_period)
+
+
 def _track_line(
     ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, params: ParamSet
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """:func:`weighted_line` through track samples, with no velocity from samples
-    spanning less than two frame periods: (velocity, weighted mean position, weighted
-    mean time)."""
+    spanning less than two frame periods (:func:`_spans_velocity`): (velocity, weighted
+    mean position, weighted mean time)."""
     slope, mean, tc = weighted_line(ts, ps, ws)
-    if ts[-1] - ts[0] < 2 * params.frame_period:
+    if not _spans_velocity(ts, params):
         slope = np.zeros(3)
     return slope, mean, tc
 
@@ -188,7 +194,7 @@ def _facing_lines(
     ):
         ts = piece.ts[near]
         slope, mean, tc = _track_line(ts, piece.ps[near], piece.ws[near], p)
-        lines.append((slope, mean, tc, bool(ts[-1] - ts[0] >= 2 * p.frame_period)))
+        lines.append((slope, mean, tc, _spans_velocity(ts, p)))
     return lines
 
 
@@ -854,7 +860,7 @@ class StreamingDetector:
             speed == 0.0
             or speed < _STILL_SIGMAS * _speed_standard_error(ts, ps, ws, (slope, mean, tc))
         )
-        measured = bool(ts[-1] - ts[0] >= 2 * p.frame_period)
+        measured = _spans_velocity(ts, p)
         fit = _TrackFit(
             tuple(samples),
             p,
@@ -1166,7 +1172,7 @@ def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSe
     p = params
     last = kept[-1].t
     ts, ps, ws = _sample_arrays(_recent_samples(kept, last, p))
-    if last - ts[0] < 2 * p.frame_period:
+    if not _spans_velocity(ts, p):
         return True
     return _reaches(ts, ps, ws, last, sample.t, sample.position, p)
 
@@ -1381,7 +1387,7 @@ def smoothed_position(
             x = stamp - tc
             return coef[0] + coef[1] * x + coef[2] * x * x
     slope, mean, tc = _track_line(tt, pp, ww, p)
-    if across is not None and tt[-1] - tt[0] < 2 * p.frame_period:
+    if across is not None and not _spans_velocity(tt, p):
         # The first returns after a pause, all within a frame or two, have no velocity of
         # their own, and held still a pass 110 m out was 2-5 m off (deviation 84).
         slope = across
