@@ -70,30 +70,49 @@ def drifting_static_keys(
     static_keys: np.ndarray, first_bin: np.ndarray, last_bin: np.ndarray, params: ParamSet
 ) -> np.ndarray:
     """The static voxels a slowly moving object left behind (a drone drifting, or slowing
-    into a hover and out of it, overhead).
+    into a hover and out of it, overhead, or hovering beside structure).
 
     At 1.5 m voxels and 1 s bins, a drone moving at under about 0.5 m/s fills each voxel
     it crosses for three or more bins and so counts as static; when the voxels it filled
     span more than ``hover_max_extent`` the compact-group exception does not keep them.
     Structure is hit over the whole recording, such an object for a few seconds per
-    voxel. Static voxels are grouped as in :func:`compact_static_keys`; the groups of at
-    least three voxels whose median hit span (last minus first bin, in seconds) is at
-    most ``static_drift_span`` are returned (sorted keys). ``first_bin`` and ``last_bin``
-    are per key, in ``static_bin`` units.
+    voxel. With a voxel's hit span its last minus first bin, in seconds, two kinds of
+    voxels are returned (sorted keys):
+
+    - the groups of touching static voxels (as in :func:`compact_static_keys`) of at
+      least three voxels whose median span is at most ``static_drift_span``
+      (deviation 46 in docs/detector.md);
+    - the groups of at least three touching static voxels *each* of span at most
+      ``static_drift_span``, wherever they lie: a drone hovering a metre or two from a
+      tree touches the crown's group through one sparse voxel at its edge, and the
+      group's median span is then the crown's (deviation 86).
+
+    ``first_bin`` and ``last_bin`` are per key, in ``static_bin`` units.
     """
     if static_keys.size < 3 or params.static_drift_span <= 0:
         return static_keys[:0]
+    span = (np.asarray(last_bin) - np.asarray(first_bin)) * params.static_bin
+    short = span <= params.static_drift_span
+    limit = params.static_drift_span
+    drifting = _drifting_groups(static_keys, span, limit)
+    if np.count_nonzero(short) >= 3:
+        drifting[short] |= _drifting_groups(static_keys[short], span[short], limit)
+    return static_keys[drifting]
+
+
+def _drifting_groups(static_keys: np.ndarray, span: np.ndarray, limit: float) -> np.ndarray:
+    """(V,) bool: the voxels in groups of at least three touching voxels whose (lower)
+    median ``span`` is at most ``limit``. Given only voxels of span <= ``limit``, every
+    group of three or more."""
     from clusterfilter_ros.core.clustering import voxel_clusters
 
     comp = voxel_clusters(static_keys, np.ones(static_keys.size), 0.0)
     k = int(comp.max()) + 1
     n = np.bincount(comp, minlength=k)
-    span = (np.asarray(last_bin) - np.asarray(first_bin)) * params.static_bin
     order = lex_order(span, comp)
     starts = np.searchsorted(comp[order], np.arange(k))
     median_span = span[order[starts + (n - 1) // 2]]  # the lower median
-    drifting = (n >= 3) & (median_span <= params.static_drift_span)
-    return static_keys[drifting[comp]]
+    return ((n >= 3) & (median_span <= limit))[comp]
 
 
 def suppressed_keys(persistent: np.ndarray, params: ParamSet) -> np.ndarray:

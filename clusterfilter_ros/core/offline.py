@@ -609,6 +609,7 @@ def detect_offline(
             None,
             excess_residual=params.split_excess_residual,
             two_trackers=True,
+            apart=params.split_apart,
         )
     if params.split_still:
         cut_labels, k, cut = split_still(labels, xyz, t, scores, params)

@@ -318,8 +318,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "float",
         8.0,
         "Offline: a group of >= 3 touching static voxels whose median voxel was hit over at "
-        "most this many seconds is kept: a drone drifting slowly or slowing into a hover, "
-        "not structure (0 = off).",
+        "most this many seconds is kept, and so are >= 3 touching voxels each hit over at "
+        "most this long that touch longer-hit structure: a drone drifting slowly, slowing "
+        "into a hover or hovering beside a tree, not structure (0 = off).",
         minimum=0.0,
         maximum=600.0,
     ),
@@ -612,6 +613,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "whose excess residual (m, beyond the windows' expected scatter) is above this is "
         "split too, however narrow (a bird's returns joined to a drone's track make it "
         "irregular without widening it); 0 = off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
+        "split_apart",
+        "float",
+        3.0,
+        "Splitting merged clusters, offline only: a confident flying cluster is split too "
+        "when, in at least three frame samples, returns of two of its kinematic tracks of "
+        ">= 8 returns each lie more than this many metres apart (a bird crossing the "
+        "drone's path joined its cluster); 0 = off.",
         minimum=0.0,
         maximum=100.0,
     ),

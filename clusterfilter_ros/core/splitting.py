@@ -63,6 +63,11 @@ MAX_CONTACT = 0.1
 MOVING_COHERENCE = 0.4
 #: Seconds per centroid in :func:`still_run`: several sweeps of a sparse drone's returns.
 STILL_STEP = 0.5
+#: :func:`two_objects`: the kinematic tracks compared hold at least this many returns
+#: (a stray return or two of sky noise starts a track of its own) ...
+APART_TRACK_POINTS = 8
+#: ... and lie apart in at least this many frame samples (docs/detector.md, dev. 87).
+APART_SAMPLES = 3
 
 
 def return_groups(
@@ -201,6 +206,58 @@ def kinematic_tracks(
     return track_of_group[groups]
 
 
+def two_objects(xyz: np.ndarray, t: np.ndarray, distance: float, params: ParamSet) -> bool:
+    """Whether one cluster's returns are two objects: in at least :data:`APART_SAMPLES`
+    frame samples, return groups of its kinematic tracks of at least
+    :data:`APART_TRACK_POINTS` returns lie more than ``distance`` metres apart (the
+    diagonal of the box around the sample's group centroids).
+
+    A bird crossing a drone's path a few metres away can join the drone's cluster without
+    widening it or making it irregular: the two share few sweeps, and then the returns of
+    one object each. A drone's own track cut by its gaps gives pieces that follow one
+    another, not pieces seen apart in one sweep.
+    """
+    tracks = kinematic_tracks(xyz, t, params)
+    big = np.bincount(tracks)[tracks] >= APART_TRACK_POINTS
+    if np.unique(tracks[big]).size < 2:
+        return False
+    groups, group_sample = return_groups(xyz[big], t[big], params.frame_period, params.split_blob)
+    n_groups = int(groups.max()) + 1
+    size = np.bincount(groups, minlength=n_groups).astype(np.float64)
+    centre = (
+        np.stack(
+            [np.bincount(groups, weights=xyz[big][:, a], minlength=n_groups) for a in range(3)], 1
+        )
+        / size[:, None]
+    )
+    ((lo, hi),) = group_bounds(group_sample, int(group_sample.max()) + 1, centre)
+    return int(np.count_nonzero(np.linalg.norm(hi - lo, axis=1) > distance)) >= APART_SAMPLES
+
+
+def crossed_clusters(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    params: ParamSet,
+    distance: float,
+    skip: np.ndarray,
+) -> np.ndarray:
+    """Indices of the confident clusters (flying as in :func:`merged_clusters`, at least
+    ``min_confidence``, not in ``skip``) that are :func:`two_objects` at ``distance``."""
+    confident = np.nonzero(_flying(scores, params) & (scores.confidence >= params.min_confidence))[
+        0
+    ]
+    return np.asarray(
+        [
+            c
+            for c in np.setdiff1d(confident, skip)
+            if two_objects(xyz[labels == c], t[labels == c], distance, params)
+        ],
+        dtype=np.int64,
+    )
+
+
 def merged_clusters(
     scores: ClusterScores,
     params: ParamSet,
@@ -224,12 +281,17 @@ def merged_clusters(
         wide |= (scores.excess_residual > excess_residual) & (
             scores.confidence < params.min_confidence
         )
-    return np.nonzero(
-        wide
-        & (scores.centroid[:, 2] >= params.min_centroid_z)
+    return np.nonzero(wide & _flying(scores, params))[0]
+
+
+def _flying(scores: ClusterScores, params: ParamSet) -> np.ndarray:
+    """(K,) bool: clusters that may be split: centroid at least ``min_centroid_z`` high,
+    at least twice ``min_cluster_points`` and at most ``max_cluster_points`` points."""
+    return (
+        (scores.centroid[:, 2] >= params.min_centroid_z)
         & (scores.n_points >= 2 * params.min_cluster_points)
         & (scores.n_points <= params.max_cluster_points)
-    )[0]
+    )
 
 
 def split_merged(
@@ -242,10 +304,11 @@ def split_merged(
     min_extent: float | None = None,
     excess_residual: float = 0.0,
     cascade: bool = False,
+    also: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """Labels with each of :func:`merged_clusters` (``min_extent`` and
-    ``excess_residual`` passed on) replaced by its kinematic tracks (``cascade``:
-    :func:`kinematic_tracks`'s).
+    ``excess_residual`` passed on), and each cluster in ``also``, replaced by its
+    kinematic tracks (``cascade``: :func:`kinematic_tracks`'s).
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
@@ -256,6 +319,8 @@ def split_merged(
     labels = np.asarray(labels, dtype=np.int64)
     split = merged_clusters(scores, params, min_extent, excess_residual)
     k = int(labels.max()) + 1 if labels.size else 0
+    if also is not None and len(also):
+        split = np.union1d(split, np.asarray(also, dtype=split.dtype))
     if split.size and structure_keys is not None and structure_keys.size:
         which = np.zeros(k, dtype=bool)
         which[split] = True
@@ -293,8 +358,10 @@ def split_and_score(
     min_extent: float | None = None,
     excess_residual: float = 0.0,
     two_trackers: bool = False,
+    apart: float = 0.0,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
-    """:func:`split_merged`, then the scores of the new labels.
+    """:func:`split_merged`, then the scores of the new labels; with ``apart`` > 0,
+    the confident clusters of :func:`crossed_clusters` are split too.
 
     Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
     window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
@@ -304,11 +371,15 @@ def split_and_score(
     that were in a split cluster).
     """
     args = (labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual)
-    out, k, was_split = split_merged(*args)
+    also = None
+    if apart > 0:
+        merged = merged_clusters(scores, params, min_extent, excess_residual)
+        also = crossed_clusters(labels, xyz, t, scores, params, apart, merged)
+    out, k, was_split = split_merged(*args, also=also)
     pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)
     if not two_trackers or not was_split.any():
         return out, k, pieces, was_split
-    alt, k_alt, _ = split_merged(*args, cascade=True)
+    alt, k_alt, _ = split_merged(*args, cascade=True, also=also)
     alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
     rank, alt_rank = _reportable_rank(pieces, params), _reportable_rank(alt_pieces, params)
     better = []

@@ -6,7 +6,7 @@ import numpy as np
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid, persistent_mask, static_offline
-from clusterfilter_ros.core.clustering import spacetime_cluster_points
+from clusterfilter_ros.core.clustering import spacetime_cluster_points, voxel_clusters
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import motion_coherence
 
@@ -185,3 +185,26 @@ def test_drifting_static_keys_needs_short_spans():
     assert drifting_static_keys(keys, whole, whole + 19, params).size == 0
     # Fewer than three voxels: left to the compact-group exception.
     assert drifting_static_keys(keys[:2], first[:2], first[:2] + 4, params).size == 0
+
+
+def test_a_drone_hovering_beside_structure_is_released_from_it():
+    from clusterfilter_ros.core.background import drifting_static_keys
+
+    params = detector_params()
+    # A crown: eight voxels hit over the whole 20 s; a drone hovering beside it for 5 s
+    # fills three voxels, the first of which touches the crown's corner diagonally.
+    crown = [[x, y, 6.0] for x in (0.0, 1.5) for y in (0.0, 1.5, 3.0, 4.5)]
+    drone = [[3.0, 6.0, 7.5], [4.5, 6.0, 7.5], [4.5, 7.5, 7.5]]
+    keys = voxel.voxel_keys(np.array(crown + drone), 1.5)
+    first = np.array([0] * 8 + [7, 7, 8])
+    last = np.array([19] * 8 + [12, 12, 12])
+    order = np.argsort(keys)
+    keys, first, last = keys[order], first[order], last[order]
+    kept = drifting_static_keys(keys, first, last, params)
+    assert set(kept.tolist()) == set(voxel.voxel_keys(np.array(drone), 1.5).tolist())
+    # Crown and drone are one group of touching voxels, whose median span is the crown's
+    # (deviation 46 alone kept nothing).
+    assert np.unique(voxel_clusters(keys, np.ones(keys.size), 0.0)).size == 1
+    # Two short-span voxels beside the crown are too few to be a drone.
+    two = ~np.isin(keys, voxel.voxel_keys(np.array(drone[2:]), 1.5))
+    assert drifting_static_keys(keys[two], first[two], last[two], params).size == 0

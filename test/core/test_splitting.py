@@ -22,6 +22,7 @@ from clusterfilter_ros.core.splitting import (
     split_merged,
     split_still,
     still_run,
+    two_objects,
 )
 
 #: A hovering drone (t, x, y, z) and the returns of a bird that passed it 2-5 m away, one
@@ -485,3 +486,56 @@ def test_a_bird_passing_a_hovering_drone_is_split_off():
     labels, scores = _split_whole_cluster(xyz, t, _HOVER_AND_BIRD_DRONE, params)
     assert params.split_min_extent < scores.local_extent[0] < 1.0
     assert split_merged(labels, xyz, t, scores, params.copy(split_min_extent=1.0))[1] == 1
+
+
+def _crossed_pass(seed: int = 0):
+    """(xyz, t, is_drone): the drone of :func:`_drone` for 8 s, two returns a frame, and
+    a bird that meets it 3.5 m away 0.3 s before its last return and flies on alone for
+    4 s the other way (fast_pass seed 3401 of the thirty-third fresh set)."""
+    rng = np.random.default_rng(seed)
+    stamps = np.arange(0.0, 8.0, 0.1)
+    bird_t = np.arange(7.7, 12.0, 0.1)
+    start = _drone(np.array([7.7]))[0] + np.array([0.0, 3.5, 0.0])
+    bird = start + np.outer(bird_t - 7.7, [-5.0, 3.0, 0.5])
+    xyz = np.vstack([np.repeat(_drone(stamps), 2, axis=0), np.repeat(bird, 2, axis=0)])
+    xyz += rng.normal(0.0, 0.1, xyz.shape)
+    t = np.concatenate([np.repeat(stamps, 2), np.repeat(bird_t, 2)])
+    return xyz, t, np.arange(t.size) < 2 * stamps.size
+
+
+def test_two_objects_needs_two_tracks_seen_apart_in_several_sweeps():
+    params = detector_params()
+    xyz, t, drone = _crossed_pass()
+    assert two_objects(xyz, t, 3.0, params)
+    assert not two_objects(xyz, t, 8.0, params)  # at most ~7 m apart while both are seen
+    # The drone alone, with two stray returns 6 m off its path: no second track.
+    stray_t = np.array([2.0, 5.0])
+    strays = _drone(stray_t) + np.array([0.0, 6.0, 0.0])
+    assert not two_objects(
+        np.vstack([xyz[drone], strays]), np.concatenate([t[drone], stray_t]), 3.0, params
+    )
+    # The drone's track cut by a gap, its second piece 2 m aside: pieces one after another.
+    cut = drone & ((t < 3.5) | (t > 5.0))
+    shifted = xyz[cut] + (t[cut] > 5.0)[:, None] * np.array([0.0, 2.0, 0.0])
+    assert not two_objects(shifted, t[cut], 3.0, params)
+
+
+def test_a_confident_cluster_a_bird_crossed_is_split_only_with_split_apart():
+    xyz, t, drone = _crossed_pass()
+    params = detector_params()
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    # Confident and narrow: none of the other split rules applies.
+    assert scores.confidence[0] >= params.min_confidence
+    assert scores.local_extent[0] < params.max_local_extent
+    assert merged_clusters(scores, params, excess_residual=params.split_excess_residual).size == 0
+    score = functools.partial(score_clusters, t0=0.0, coherence_origin=0.0)
+    whole = split_and_score(labels, xyz, t, scores, params, score, two_trackers=True)
+    assert whole[1] == 1 and not whole[3].any()
+    out, k, pieces, was_split = split_and_score(
+        labels, xyz, t, scores, params, score, two_trackers=True, apart=params.split_apart
+    )
+    assert k == 2 and was_split.all()
+    mine = out[drone][0]
+    assert np.all(out[drone] == mine) and not np.any(out[~drone] == mine)
+    assert pieces.confidence[mine] >= params.min_confidence
