@@ -25,6 +25,9 @@ offline (:func:`split_and_score` with ``two_trackers``) each cluster is also spl
 matching cascade (tracks with a velocity choose first) and keeps the split whose best
 reportable piece ranks higher.
 
+Offline, a confident cluster is split too when two of its tracks are seen apart in
+several sweeps (:func:`two_objects`): a bird that crossed the drone's path and flew on.
+
 Only flying clusters are split (centroid above ``min_centroid_z``), and, when the static
 structure is known, only those with at most :data:`MAX_CONTACT` of their points in or
 next to its voxels: what suppression leaves of walls and crowns is often wide, and
@@ -245,13 +248,11 @@ def crossed_clusters(
 ) -> np.ndarray:
     """Indices of the confident clusters (flying as in :func:`merged_clusters`, at least
     ``min_confidence``, not in ``skip``) that are :func:`two_objects` at ``distance``."""
-    confident = np.nonzero(_flying(scores, params) & (scores.confidence >= params.min_confidence))[
-        0
-    ]
+    confident = _flying(scores, params) & (scores.confidence >= params.min_confidence)
     return np.asarray(
         [
             c
-            for c in np.setdiff1d(confident, skip)
+            for c in np.setdiff1d(np.flatnonzero(confident), skip)
             if two_objects(xyz[labels == c], t[labels == c], distance, params)
         ],
         dtype=np.int64,
