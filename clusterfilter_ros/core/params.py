@@ -620,10 +620,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "split_apart",
         "float",
         3.0,
-        "Splitting merged clusters, offline only: a confident flying cluster is split too "
-        "when, in at least three frame samples, returns of two of its kinematic tracks of "
-        ">= 8 returns each lie more than this many metres apart (a bird crossing the "
-        "drone's path joined its cluster); 0 = off.",
+        "Splitting merged clusters: a confident flying cluster is split too when, in at "
+        "least three frame samples, returns of two of its kinematic tracks of >= 8 returns "
+        "each lie more than this many metres apart (a bird crossing the drone's path joined "
+        "its cluster); 0 = off.",
         minimum=0.0,
         maximum=100.0,
     ),

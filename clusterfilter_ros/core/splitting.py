@@ -25,8 +25,8 @@ offline (:func:`split_and_score` with ``two_trackers``) each cluster is also spl
 matching cascade (tracks with a velocity choose first) and keeps the split whose best
 reportable piece ranks higher.
 
-Offline, a confident cluster is split too when two of its tracks are seen apart in
-several sweeps (:func:`two_objects`): a bird that crossed the drone's path and flew on.
+A confident cluster is split too when two of its tracks are seen apart in several
+sweeps (:func:`two_objects`): a bird that crossed the drone's path and flew on.
 
 Only flying clusters are split (centroid above ``min_centroid_z``), and, when the static
 structure is known, only those with at most :data:`MAX_CONTACT` of their points in or

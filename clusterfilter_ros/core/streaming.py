@@ -1083,7 +1083,15 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     scores = scorer(labels, xyz, t, ps, n_clusters=k)
     if p.split_merged:
         labels, k, scores, _ = split_and_score(
-            labels, xyz, t, scores, ps, scorer, structure, p.stream_split_min_extent
+            labels,
+            xyz,
+            t,
+            scores,
+            ps,
+            scorer,
+            structure,
+            p.stream_split_min_extent,
+            apart=p.split_apart,
         )
     chosen = select_clusters(scores, ps)
     if chosen:

@@ -401,7 +401,7 @@ def test_streaming_splits_with_its_own_min_extent(monkeypatch):
     original = streaming.split_and_score
 
     def spy(*args, **kwargs):
-        seen.append(args[7])
+        seen.append((args[7], kwargs.get("apart")))
         return original(*args, **kwargs)
 
     monkeypatch.setattr(streaming, "split_and_score", spy)
@@ -411,7 +411,8 @@ def test_streaming_splits_with_its_own_min_extent(monkeypatch):
     for stamp in np.unique(t):
         at = t == stamp
         detector.push(Frame(float(stamp), AVIA, xyz[at].astype(np.float32)))
-    assert seen and set(seen) == {3.5}
+    # Its own minimum extent; the crossed-pass split as offline (deviation 87).
+    assert seen and set(seen) == {(3.5, params.split_apart)}
 
 
 def _hover_then_fly(t: np.ndarray, hover_s: float = 5.0) -> np.ndarray:
