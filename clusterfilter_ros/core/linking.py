@@ -18,6 +18,9 @@ was heading:
   velocity, whichever is smaller) is within ``link_gate + link_max_accel * dt^2 / 2``
   (never more than ``link_gate + link_max_speed * dt``); two fragments without a velocity
   link only across one frame period, by the distance between A's end and B's start;
+  where both ends have a velocity, they may differ by at most
+  ``link_max_dv + link_max_accel * dt`` (a bird leg heading where the drone's track
+  begins is another object, however well its line meets the track);
 - a fragment's first or last sample that is a single return lying beyond the linking
   reach of where the fragment's next ``link_fit_window`` of samples inward was heading
   (another object's return the clusterer joined to it) does not define that end; the
@@ -257,6 +260,12 @@ def _linkable(
     dist = np.minimum(dist, np.where(known_b, back, np.inf))
     dist = np.where(any_v, dist, plain)
     ok = dist <= reach
+    if params.link_max_dv > 0:
+        # Both ends moving: the object cannot have changed its velocity by more than it
+        # could accelerate over the gap, give or take the fits' error (deviation 88).
+        dv = np.linalg.norm(v_s[b] - v_e[aa], axis=-1)
+        turn = float(params.link_max_dv) + float(params.link_max_accel) * adt
+        ok &= ~(known_a & known_b) | (dv <= turn)
     # Distance relative to the reach, plus the gap relative to link_max_gap: the next
     # fragment in time comes first (by distance alone, the reach growing with the gap
     # would let A skip over B to C, leaving B alone).

@@ -484,6 +484,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "link_max_dv",
+        "float",
+        10.0,
+        "Offline track linking: where both facing ends of two fragments have a velocity, "
+        "the velocities may differ by at most this (m/s) plus link_max_accel * gap: a bird "
+        "leg heading where a drone's track begins is not the drone; 0 = off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "link_max_speed",
         "float",
         15.0,
@@ -510,6 +520,15 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "single-frame fragment at a chain's end has no velocity, its chain has).",
         minimum=1,
         maximum=20,
+    ),
+    ParamSpec(
+        "stream_link_max_dv",
+        "float",
+        0.0,
+        "Streaming: link_max_dv for the local history's linking; 0 = off (measured at 10 "
+        "on the spent seeds: small losses of detection, docs/detector.md deviation 88).",
+        minimum=0.0,
+        maximum=100.0,
     ),
     ParamSpec(
         "stream_link_passes",

@@ -1066,7 +1066,8 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         return choice(None, 0.0, False, 0)
     # Clusters are scored with streaming's own smallest candidate size.
     ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
-    labels, k = global_clusters(xyz, t, p, passes=p.stream_link_passes)
+    linking = p.copy(link_max_dv=p.stream_link_max_dv)
+    labels, k = global_clusters(xyz, t, linking, passes=p.stream_link_passes)
     if not k:
         return choice(None, 0.0, False, k, coast=True)
     # Windows aligned to the stream's first stamp (deterministic), unless the stream's
