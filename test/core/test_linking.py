@@ -750,3 +750,27 @@ def test_a_leg_heading_where_another_object_appears_is_not_linked_to_it():
     xyz, t, lab = (np.concatenate(parts) for parts in zip(first, second, strict=True))
     _, k = link_fragments(lab, xyz, t, detector_params())
     assert k == 1
+
+
+def test_streaming_links_with_its_own_velocity_test(monkeypatch):
+    # Deviation 88 is offline only by default: the live history links by position alone.
+    from clusterfilter_ros.core import streaming
+    from clusterfilter_ros.core.frame import AVIA, Frame
+
+    seen = []
+    original = streaming.global_clusters
+
+    def spy(xyz, t, params, **kwargs):
+        seen.append(params.link_max_dv)
+        return original(xyz, t, params, **kwargs)
+
+    monkeypatch.setattr(streaming, "global_clusters", spy)
+    rng = np.random.default_rng(4)
+    xyz, t, _ = _leg(rng, 0.0, 2.0, (0.0, 0.0, 20.0), (8.0, 0.0, 0.0), 0)
+    for dv in (0.0, 7.0):
+        params = detector_params().copy(warmup=0.0, stream_link_max_dv=dv)
+        assert params.link_max_dv == 10.0
+        detector = streaming.StreamingDetector(params)
+        for stamp in np.unique(t):
+            detector.push(Frame(float(stamp), AVIA, xyz[t == stamp].astype(np.float32)))
+    assert set(seen) == {0.0, 7.0}
