@@ -249,14 +249,12 @@ def crossed_clusters(
     """Indices of the confident clusters (flying as in :func:`merged_clusters`, at least
     ``min_confidence``, not in ``skip``) that are :func:`two_objects` at ``distance``."""
     confident = _flying(scores, params) & (scores.confidence >= params.min_confidence)
-    return np.asarray(
-        [
-            c
-            for c in np.setdiff1d(np.flatnonzero(confident), skip)
-            if two_objects(xyz[labels == c], t[labels == c], distance, params)
-        ],
-        dtype=np.int64,
-    )
+    crossed = []
+    for c in np.setdiff1d(np.flatnonzero(confident), skip):
+        member = labels == c
+        if two_objects(xyz[member], t[member], distance, params):
+            crossed.append(c)
+    return np.asarray(crossed, dtype=np.int64)
 
 
 def merged_clusters(

@@ -208,8 +208,20 @@ def _continues(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) -> bo
     if not 0.0 <= gap <= p.link_max_gap:
         return False
     middle = earlier.ts[-1] + 0.5 * gap
-    ends = [mean + slope * (middle - tc) for slope, mean, tc, _ in _facing_lines(earlier, later, p)]
-    reach = p.track_gate + 0.5 * p.link_max_accel * (0.5 * gap) ** 2
+    return _lines_meet(_facing_lines(earlier, later, p), middle, 0.5 * gap, p)
+
+
+def _lines_meet(
+    lines: list[tuple[np.ndarray, np.ndarray, float, bool]],
+    at: float,
+    elapsed: float,
+    params: ParamSet,
+) -> bool:
+    """Whether the two lines of :func:`_facing_lines`, carried to time ``at``, lie within
+    ``track_gate`` plus half ``link_max_accel`` times ``elapsed`` squared (the way an
+    object may have bent off a line over ``elapsed`` seconds) of each other."""
+    ends = [mean + slope * (at - tc) for slope, mean, tc, _ in lines]
+    reach = params.track_gate + 0.5 * params.link_max_accel * elapsed**2
     return float(np.linalg.norm(ends[0] - ends[1])) <= reach
 
 
@@ -221,18 +233,15 @@ def _could_continue(earlier: _TrackPiece, later: _TrackPiece, params: ParamSet) 
     velocity, its line carried across the whole gap must reach the other end within
     ``track_gate`` plus half ``link_max_accel`` times the squared gap; with none, nothing
     says otherwise (deviation 85)."""
-    p = params
-    (s0, m0, t0, v0), (s1, m1, t1, v1) = _facing_lines(earlier, later, p)
+    lines = _facing_lines(earlier, later, params)
+    v0, v1 = lines[0][3], lines[1][3]
     gap = float(later.ts[0] - earlier.ts[-1])
     if v0 and v1:
-        at = float(earlier.ts[-1]) + 0.5 * gap
-        reach = p.track_gate + 0.5 * p.link_max_accel * (0.5 * gap) ** 2
-    elif v0 or v1:
+        return _lines_meet(lines, float(earlier.ts[-1]) + 0.5 * gap, 0.5 * gap, params)
+    if v0 or v1:
         at = float(later.ts[0]) if v0 else float(earlier.ts[-1])
-        reach = p.track_gate + 0.5 * p.link_max_accel * gap**2
-    else:
-        return True
-    return float(np.linalg.norm(m0 + s0 * (at - t0) - m1 - s1 * (at - t1))) <= reach
+        return _lines_meet(lines, at, gap, params)
+    return True
 
 
 def _recent_samples(
