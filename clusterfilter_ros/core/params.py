@@ -1063,6 +1063,30 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "report_backfill",
+        "float",
+        7.0,
+        "report_lag: a frame at which the live output has not reported anything yet waits "
+        "up to this many seconds beyond report_lag for a track to be confirmed: a drone "
+        "confirmed more than report_lag after its first returns is then reported late "
+        "from those returns (once its live run has lasted report_backfill_min_run), all "
+        "at once, in stamp order. The late output's delay is then up to report_lag + "
+        "report_backfill; beyond local_history - report_lag nothing is gained; 0 = off.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
+        "report_backfill_min_run",
+        "float",
+        2.0,
+        "report_backfill: the frames before a confirmation are reported late only once the "
+        "live output's run of estimates (each within max_gap of the one before) that began "
+        "with it has lasted this long (s): a bird leg reported live for a moment is not "
+        "reported over its whole history.",
+        minimum=0.0,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "report_lag_min_run",
         "float",
         0.5,

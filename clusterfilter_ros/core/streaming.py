@@ -326,6 +326,10 @@ class StreamingDetector:
         # survive reset().
         self._lagged: deque[float] = deque()
         self._ready: deque[Estimate] = deque(maxlen=_MAX_LAGGED)
+        # report_backfill: in stamp order, frames released while a new track's live run
+        # was still too short to backfill (stamp, None) and the estimates made after them
+        # (stamp, estimate), held so that the output stays in stamp order.
+        self._held: deque[tuple[float, Estimate | None]] = deque()
         self.delayed_dropped = 0
         self.reset()
 
@@ -506,7 +510,7 @@ class StreamingDetector:
             "last_push_ms": self._last_push_ms,
             "frames_pushed": float(self.frames_pushed),
             "frames_rejected": float(self.frames_rejected),
-            "delayed_pending": float(len(self._lagged)),
+            "delayed_pending": float(len(self._lagged) + len(self._held)),
             "delayed_dropped": float(self.delayed_dropped),
         }
 
@@ -707,7 +711,7 @@ class StreamingDetector:
         ``report_lag`` before the newest) can take samples from."""
         p = self.params
         reach = max(p.track_window, p.link_max_gap) + max(p.max_gap, p.max_extrapolation)
-        horizon = self._now - p.report_lag - reach
+        horizon = self._now - p.report_lag - p.report_backfill - reach
         while self._archive and self._archive[0].ts[-1] < horizon:
             self._archive.popleft()
         # A kept piece spans at most local_history.
@@ -915,36 +919,94 @@ class StreamingDetector:
         on both sides of each (:func:`smoothed_position`) of the reported tracks
         (:meth:`_delayed_tracks`): the first that supports one. Only where push() has
         returned an estimate since the frame's stamp: an object confirmed only after its
-        returns had stopped (so never reported by push) is not reported late either."""
+        returns had stopped (so never reported by push) is not reported late either.
+
+        With ``report_backfill`` a frame push() has reported nothing since waits up to
+        that much longer for a confirmation. One whose first live estimate came more than
+        ``report_lag`` after it (backfilled) is estimated once the live run holding that
+        estimate has lasted ``report_backfill_min_run``, and not at all if the run ends
+        sooner or the wait exceeds ``report_backfill`` (:meth:`_resolve_held`); the
+        estimates made meanwhile are held back so that the output stays in stamp order."""
+        p = self.params
         lagged = self._lagged
+        wait_until = until - p.report_backfill
         tracks: list[_TrackPiece] | None = None  # built once for all frames released here
+        self._resolve_held(until)
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
-            stamp = lagged.popleft()
+            stamp = lagged[0]
+            if self._last_live < stamp and stamp > wait_until and len(lagged) <= _MAX_LAGGED:
+                break  # nothing reported live since this frame: it waits for a confirmation
+            lagged.popleft()
             if self._last_live < stamp:
                 continue
-            shortest = self.params.report_lag_min_run
+            if p.report_backfill > 0:
+                run = self._live_run(stamp)
+                if run is not None and run[0] - stamp > p.report_lag:
+                    self._held.append((stamp, None))  # backfilled: resolved below
+                    continue
+            shortest = p.report_lag_min_run
             if shortest > 0 and self._live_run_seconds(stamp) < shortest:
                 continue
             if tracks is None:
                 tracks = self._delayed_tracks()
-            for track in tracks:
-                if stamp > track.reported_until:
-                    continue
-                estimate = self._delayed_estimate(stamp, track)
-                if estimate is not None:
-                    self.delayed_dropped += len(self._ready) == self._ready.maxlen
-                    self._ready.append(estimate)
-                    break
+            estimate = self._tracks_estimate(stamp, tracks)
+            if estimate is None:
+                continue
+            if self._held:
+                self._held.append((stamp, estimate))
+            else:
+                self._emit(estimate)
+        self._resolve_held(until)
 
-    def _live_run_seconds(self, stamp: float) -> float:
-        """How long the live output's run of estimates (each within ``max_gap`` of the one
-        before) that holds its first estimate at or after ``stamp`` lasted; inf while
-        that run is still going (its newest estimate is the newest, at most ``max_gap``
-        old), 0 if there is no estimate at or after ``stamp``."""
+    def _resolve_held(self, until: float) -> None:
+        """Emit the held frames in order while the first backfilled one among them is
+        decided: estimated once its live run (:meth:`_live_run`) has lasted
+        ``report_backfill_min_run``, dropped if the run ended sooner or the frame is more
+        than ``report_backfill`` past due (``until`` inf: every frame is decided)."""
+        p = self.params
+        held = self._held
+        tracks: list[_TrackPiece] | None = None
+        while held:
+            stamp, estimate = held[0]
+            if estimate is None:
+                run = self._live_run(stamp)
+                lasted = run is not None and run[1] - run[0] >= p.report_backfill_min_run
+                going = run is not None and run[2]
+                waited = stamp <= until - p.report_backfill or len(held) > _MAX_LAGGED
+                if not lasted and going and not waited:
+                    return
+                if lasted:
+                    if tracks is None:
+                        tracks = self._delayed_tracks()
+                    estimate = self._tracks_estimate(stamp, tracks)
+            held.popleft()
+            if estimate is not None:
+                self._emit(estimate)
+
+    def _tracks_estimate(self, stamp: float, tracks: list[_TrackPiece]) -> Estimate | None:
+        """The delayed estimate at ``stamp`` from the first of ``tracks`` (of
+        :meth:`_delayed_tracks`) that reaches it and supports one."""
+        for track in tracks:
+            if stamp > track.reported_until:
+                continue
+            estimate = self._delayed_estimate(stamp, track)
+            if estimate is not None:
+                return estimate
+        return None
+
+    def _emit(self, estimate: Estimate) -> None:
+        self.delayed_dropped += len(self._ready) == self._ready.maxlen
+        self._ready.append(estimate)
+
+    def _live_run(self, stamp: float) -> tuple[float, float, bool] | None:
+        """(first, last stamp, still going) of the live output's run of estimates (each
+        within ``max_gap`` of the one before) that holds its first estimate at or after
+        ``stamp``; still going: its newest estimate is the newest, at most ``max_gap``
+        old. None if there is no estimate at or after ``stamp``."""
         reports = self._live_reports
         gap = self.params.max_gap
         if not reports or reports[-1][0] < stamp:
-            return 0.0
+            return None
         # Walk back from the newest estimate, run by run, to the earliest run ending at or
         # after ``stamp``.
         newest = reports[-1][0]
@@ -961,9 +1023,15 @@ class StreamingDetector:
         else:
             found = (start, end)
         run_start, run_end = found
-        if run_end == newest and self._now - newest <= gap:
-            return math.inf
-        return run_end - run_start
+        return run_start, run_end, run_end == newest and self._now - newest <= gap
+
+    def _live_run_seconds(self, stamp: float) -> float:
+        """How long the live run of :meth:`_live_run` lasted; inf while it is still
+        going, 0 if there is no estimate at or after ``stamp``."""
+        run = self._live_run(stamp)
+        if run is None:
+            return 0.0
+        return math.inf if run[2] else run[1] - run[0]
 
     def _delayed_tracks(self) -> list[_TrackPiece]:
         """The tracks delayed estimates come from, in order of preference: the current

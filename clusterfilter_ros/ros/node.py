@@ -9,14 +9,16 @@ worker thread pushes them into :class:`~clusterfilter_ros.core.streaming.Streami
 so the executor keeps receiving (and diagnostics keep flowing) while a frame is being
 processed. Time is the header stamp only: a replay at any rate gives the same poses.
 
-Outputs (reliable QoS, depth 10):
+Outputs (reliable QoS, depth 10; ``/uav/pose_delayed`` depth 500):
 
 - ``/uav/pose`` ``geometry_msgs/PoseStamped``: stamp = time of the frame the estimate
   is for, ``frame_id`` parameter, identity orientation; nothing when no drone is found;
 - ``/uav/pose_delayed`` ``geometry_msgs/PoseStamped``: with ``report_lag`` > 0, each
   frame's position again, ``report_lag`` seconds of stream time later, from the data up
-  to then (fixed-lag smoothing; stamp = the frame's). When input stops, the frames still
-  waiting are estimated after ``report_lag`` seconds (at least one) of wall time;
+  to then (fixed-lag smoothing; stamp = the frame's); with ``report_backfill`` > 0,
+  frames before a new track's confirmation up to ``report_backfill`` seconds later still.
+  When input stops, the frames still waiting are estimated after ``report_lag`` seconds
+  (at least one) of wall time;
 - ``/uav/points`` ``sensor_msgs/PointCloud2``: the points the detector attributes to
   the drone (built only while someone subscribes);
 - ``/uav/path`` ``nav_msgs/Path``: the last ``path_length`` poses (built only while
@@ -88,6 +90,16 @@ SENSORS = (AVIA, MID360)
 OUTPUT_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+#: ``/uav/pose_delayed``'s QoS: reliable, volatile, keep last 500. It publishes in
+#: bursts: the waiting frames at a confirmation (``report_backfill``: up to 20 poses per
+#: second of it) and at a flush (``report_lag`` seconds of frames).
+DELAYED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=500,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
@@ -237,7 +249,7 @@ class DetectorNode(Node):
         self._last_error = ""
 
         self._pose_pub = self.create_publisher(PoseStamped, POSE_TOPIC, OUTPUT_QOS)
-        self._delayed_pub = self.create_publisher(PoseStamped, DELAYED_POSE_TOPIC, OUTPUT_QOS)
+        self._delayed_pub = self.create_publisher(PoseStamped, DELAYED_POSE_TOPIC, DELAYED_QOS)
         self._delayed_estimates = 0
         self._last_processed_at = time.monotonic()
         self._points_pub = self.create_publisher(PointCloud2, POINTS_TOPIC, OUTPUT_QOS)

@@ -30,7 +30,7 @@ def _push_all(frames, det):
 
 def test_delayed_estimates_cover_the_warm_up_and_follow_the_drone(scene, drone_path_fn):
     frames, _, _ = scene(duration=10.0, wall_points=400)
-    det = StreamingDetector(detector_params({"report_lag": LAG}))
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_backfill": 0.0}))
     live, delayed, released_at = _push_all(frames, det)
     # Released only once the stream is report_lag past the frame.
     assert all(e.stamp <= at - LAG + 1e-9 for e, at in zip(delayed, released_at, strict=True))
@@ -41,8 +41,9 @@ def test_delayed_estimates_cover_the_warm_up_and_follow_the_drone(scene, drone_p
     assert np.all(np.diff(stamps) >= 0)
     assert len(np.unique(stamps)) == len(stamps)
     # The live output starts once the track is confirmed, after the warm-up; the delayed
-    # one report_lag earlier (the confirmed track's returns reach back further, but the
-    # frames before were released before the confirmation) and from then on every frame.
+    # one report_lag earlier (the confirmed track's returns reach back further, but
+    # without report_backfill the frames before were released before the confirmation)
+    # and from then on every frame.
     start = frames[0].stamp
     first_live = min(e.stamp for e in live)
     assert first_live >= start + det.params.warmup
@@ -519,3 +520,89 @@ def test_a_lone_stray_sample_is_left_out_of_the_delayed_estimate():
     assert piece.ts.size == ts.size - 1 and 1.1 not in piece.ts
     est = det._delayed_estimate(1.1, piece)
     assert est is not None and np.linalg.norm(est.position - [6.6, 0.0, 40.0]) < 0.3
+
+
+def test_with_report_backfill_a_late_confirmed_drone_is_reported_from_its_first_returns(
+    scene, drone_path_fn
+):
+    # The drone is in view from the start; the live output confirms it after the warm-up
+    # (3 s), more than report_lag after its first returns.
+    frames, _, _ = scene(duration=10.0, wall_points=400)
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_backfill": 5.0}))
+    live, delayed, released_at = _push_all(frames, det)
+    first_live = min(e.stamp for e in live)
+    start = frames[0].stamp
+    assert first_live - start > LAG + 0.5
+    # At the confirmation the waiting frames come at once, oldest first: no later than
+    # report_lag + report_backfill after their stamp, and never before report_lag.
+    delays = np.array([at - e.stamp for e, at in zip(delayed, released_at, strict=True)])
+    assert np.all(delays >= LAG - 1e-9) and np.all(delays <= LAG + 5.0 + 1e-9)
+    assert delays.max() > LAG + 0.5
+    delayed += det.flush()
+    stamps = np.array([e.stamp for e in delayed])
+    assert np.all(np.diff(stamps) > 0)
+    assert stamps.min() <= start + 0.3  # the track's returns reach back to the start
+    pos = np.array([e.position for e in delayed])
+    err = np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.3
+    # Without it, the frames more than report_lag before the confirmation are lost.
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_backfill": 0.0}))
+    _, without, _ = _push_all(frames, det)
+    without += det.flush()
+    assert min(e.stamp for e in without) > first_live - LAG - 0.2
+    assert {e.stamp for e in without} < set(stamps.tolist())
+    # The frames report_lag reaches anyway are estimated when they fall due, as without
+    # it (held back only to keep the order).
+    by_stamp = {e.stamp: e.position for e in delayed}
+    for e in without:
+        np.testing.assert_array_equal(by_stamp[e.stamp], e.position)
+
+
+def test_report_backfill_leaves_the_live_output_alone(scene):
+    frames, _, _ = scene(duration=7.0, wall_points=200)
+    base = run_streaming(frames)
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_backfill": 4.0}))
+    live, _, _ = _push_all(frames, det)
+    assert [(e.stamp, e.position.tolist()) for e in live] == [
+        (e.stamp, e.position.tolist()) for e in base
+    ]
+
+
+def test_frames_wait_at_most_report_backfill_when_nothing_is_confirmed():
+    # An empty stream: frames wait report_lag + report_backfill, then are let go.
+    backfill = 3.0
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_backfill": backfill}))
+    xyz = np.zeros((0, 3), np.float32)
+    for k in range(200):
+        det.push(Frame(1000.0 + 0.1 * k, MID360, xyz))
+        assert det.delayed() == []
+    waiting = det.stats()["delayed_pending"]
+    assert (LAG + backfill) * 10 - 1 <= waiting <= (LAG + backfill) * 10 + 1
+    assert det.flush() == []
+
+
+def test_an_object_confirmed_after_its_returns_stopped_stays_unreported_with_backfill(scene):
+    frames, _, _ = scene(duration=8.0, wall_points=200, drone_points=3)
+    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1004.0 else f for f in frames]
+    values = {"report_lag": 3.0, "warmup": 4.6, "report_backfill": 5.0}
+    det = StreamingDetector(detector_params(values))
+    live, delayed, _ = _push_all(frames, det)
+    assert live == [] and delayed + det.flush() == []
+
+
+def test_a_track_reported_live_for_a_moment_is_not_backfilled(scene):
+    # The drone's returns stop 1 s after its confirmation: the live run lasts about 1.5
+    # s, less than report_backfill_min_run (2 s), so the frames before the confirmation
+    # beyond report_lag stay unreported; with the minimum at 0 they are reported.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    first_live = min(e.stamp for e in run_streaming(frames))
+    cut = first_live + 1.0
+    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > cut else f for f in frames]
+    values = {"report_lag": LAG, "report_backfill": 5.0, "report_backfill_min_run": 2.0}
+    live = run_streaming(frames)
+    assert min(e.stamp for e in live) == first_live
+    assert max(e.stamp for e in live) - first_live < 2.0
+    late = run_streaming(frames, detector_params(values))
+    assert late and min(e.stamp for e in late) >= first_live - LAG - 0.15
+    short = run_streaming(frames, detector_params({**values, "report_backfill_min_run": 0.0}))
+    assert min(e.stamp for e in short) < first_live - LAG - 0.5

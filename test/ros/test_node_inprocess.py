@@ -94,15 +94,22 @@ def test_node_with_background_reclustering_tracks_like_run_streaming(
     assert np.median(diff) < 0.05 and np.mean(diff < 0.5) >= 0.95
 
 
-def test_delayed_poses_equal_run_streaming_with_report_lag(make_rig, small_sequence, wait_for):
+@pytest.mark.parametrize("backfill", [0.0, 5.0])
+def test_delayed_poses_equal_run_streaming_with_report_lag(
+    make_rig, small_sequence, wait_for, backfill
+):
+    # With report_backfill the frames before the confirmation come in one burst.
     from clusterfilter_ros.ros.node import DELAYED_POSE_TOPIC
     from clusterfilter_ros.ros.record import PoseRecorder
 
     frames = small_sequence.frames
-    params = detector_params({"report_lag": 2.0})
-    expected = run_streaming(on_the_wire(frames), params)
+    values = {"report_lag": 2.0, "report_backfill": backfill}
+    expected = run_streaming(on_the_wire(frames), detector_params(values))
     assert len(expected) > 50
-    rig = make_rig(qos_depth=1000, max_queue=1000, sync_timeout=1.0, report_lag=2.0)
+    if backfill:  # the burst is there
+        lagged = run_streaming(on_the_wire(frames), detector_params({"report_lag": 2.0}))
+        assert len(expected) > len(lagged) + 10
+    rig = make_rig(qos_depth=1000, max_queue=1000, sync_timeout=1.0, **values)
     delayed = PoseRecorder(rig.client, pose_topic=DELAYED_POSE_TOPIC)
     replay_and_wait(rig, frames, len(frames), wait_for)
     # The last report_lag seconds of frames are estimated once the input has been quiet
