@@ -107,7 +107,8 @@ def test_delayed_poses_equal_run_streaming_with_report_lag(
     expected = run_streaming(on_the_wire(frames), detector_params(values))
     assert len(expected) > 50
     if backfill:  # the burst is there
-        lagged = run_streaming(on_the_wire(frames), detector_params({"report_lag": 2.0}))
+        plain = {"report_lag": 2.0, "report_backfill": 0.0}
+        lagged = run_streaming(on_the_wire(frames), detector_params(plain))
         assert len(expected) > len(lagged) + 10
     rig = make_rig(qos_depth=1000, max_queue=1000, sync_timeout=1.0, **values)
     delayed = PoseRecorder(rig.client, pose_topic=DELAYED_POSE_TOPIC)
