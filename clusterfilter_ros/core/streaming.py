@@ -330,6 +330,9 @@ class StreamingDetector:
         # was still too short to backfill (stamp, None) and the estimates made after them
         # (stamp, estimate), held so that the output stays in stamp order.
         self._held: deque[tuple[float, Estimate | None]] = deque()
+        # report_backfill: frames stamped up to this had fallen due with nothing reported
+        # live since them (without report_backfill they would have been dropped).
+        self._unreported_until = -math.inf
         self.delayed_dropped = 0
         self.reset()
 
@@ -921,12 +924,12 @@ class StreamingDetector:
         returned an estimate since the frame's stamp: an object confirmed only after its
         returns had stopped (so never reported by push) is not reported late either.
 
-        With ``report_backfill`` a frame push() has reported nothing since waits up to
-        that much longer for a confirmation. One whose first live estimate came more than
-        ``report_lag`` after it (backfilled) is estimated once the live run holding that
-        estimate has lasted ``report_backfill_min_run``, and not at all if the run ends
-        sooner or the wait exceeds ``report_backfill`` (:meth:`_resolve_held`); the
-        estimates made meanwhile are held back so that the output stays in stamp order."""
+        With ``report_backfill`` a frame push() has reported nothing since when it falls
+        due waits up to that much longer for a confirmation. Such a frame (backfilled) is
+        estimated once the live run holding the first live estimate after it has lasted
+        ``report_backfill_min_run``, and not at all if the run ends sooner or the wait
+        exceeds ``report_backfill`` (:meth:`_resolve_held`); the estimates made meanwhile
+        are held back so that the output stays in stamp order."""
         p = self.params
         lagged = self._lagged
         wait_until = until - p.report_backfill
@@ -935,15 +938,16 @@ class StreamingDetector:
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             stamp = lagged[0]
             if self._last_live < stamp and stamp > wait_until and len(lagged) <= _MAX_LAGGED:
-                break  # nothing reported live since this frame: it waits for a confirmation
+                # Nothing reported live since this frame, nor since the later ones due:
+                # they wait for a confirmation.
+                self._unreported_until = max(self._unreported_until, until)
+                break
             lagged.popleft()
             if self._last_live < stamp:
                 continue
-            if p.report_backfill > 0:
-                run = self._live_run(stamp)
-                if run is not None and run[0] - stamp > p.report_lag:
-                    self._held.append((stamp, None))  # backfilled: resolved below
-                    continue
+            if stamp <= self._unreported_until:
+                self._held.append((stamp, None))  # backfilled: resolved below
+                continue
             shortest = p.report_lag_min_run
             if shortest > 0 and self._live_run_seconds(stamp) < shortest:
                 continue
