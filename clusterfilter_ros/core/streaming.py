@@ -330,9 +330,6 @@ class StreamingDetector:
         # was still too short to backfill (stamp, None) and the estimates made after them
         # (stamp, estimate), held so that the output stays in stamp order.
         self._held: deque[tuple[float, Estimate | None]] = deque()
-        # report_backfill: frames stamped up to this had fallen due with nothing reported
-        # live since them (without report_backfill they would have been dropped).
-        self._unreported_until = -math.inf
         self.delayed_dropped = 0
         self.reset()
 
@@ -366,6 +363,9 @@ class StreamingDetector:
         self._foreground_points = 0
         self._jump_candidate: float | None = None
         self._last_live = -math.inf  # stamp of the newest estimate push() returned
+        # report_backfill: frames stamped up to this had fallen due with nothing reported
+        # live since them (without report_backfill they would have been dropped).
+        self._unreported_until = -math.inf
         # report_lag: earlier pieces of reported tracks, for the frames waiting for their
         # delayed estimate that the current track no longer reaches (oldest first).
         self._archive: deque[_TrackPiece] = deque(maxlen=_MAX_ARCHIVED)

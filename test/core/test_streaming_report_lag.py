@@ -606,3 +606,24 @@ def test_a_track_reported_live_for_a_moment_is_not_backfilled(scene):
     assert late and min(e.stamp for e in late) >= first_live - LAG - 0.15
     short = run_streaming(frames, detector_params({**values, "report_backfill_min_run": 0.0}))
     assert min(e.stamp for e in short) < first_live - LAG - 0.5
+
+
+def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
+    # A looped recording: the node resets the detector when stamps jump back. The first
+    # pass's drone vanishes at 5 s, so its later frames fall due with nothing reported
+    # live; that must not make the second pass's frames count as waiting ones.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    gone = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1005.0 else f for f in frames]
+    values = {"report_lag": LAG, "report_backfill": 5.0}
+    _, fresh, fresh_at = _push_all(frames, StreamingDetector(detector_params(values)))
+    det = StreamingDetector(detector_params(values))
+    _push_all(gone, det)
+    assert det._unreported_until > 1006.0  # the frames after the drone vanished waited
+    det.reset()
+    assert det._unreported_until == -np.inf
+    det.delayed()
+    _, again, again_at = _push_all(frames, det)
+    # The same estimates, released at the same frames.
+    got = [(e.stamp, e.position.tolist(), at) for e, at in zip(again, again_at, strict=True)]
+    want = [(e.stamp, e.position.tolist(), at) for e, at in zip(fresh, fresh_at, strict=True)]
+    assert got == want
