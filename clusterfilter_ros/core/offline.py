@@ -54,7 +54,12 @@ from clusterfilter_ros.core.linking import (
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
-from clusterfilter_ros.core.splitting import score_pieces, split_and_score, split_still
+from clusterfilter_ros.core.splitting import (
+    score_pieces,
+    split_and_score,
+    split_long,
+    split_still,
+)
 from clusterfilter_ros.core.trajectory import (
     Trajectory,
     fit_trajectory,
@@ -613,6 +618,11 @@ def detect_offline(
         )
     if params.split_still:
         cut_labels, k, cut = split_still(labels, xyz, t, scores, params)
+        scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
+        labels = cut_labels
+        was_split = cut if was_split is None else was_split | cut
+    if params.split_long > 0:
+        cut_labels, k, cut = split_long(labels, xyz, t, scores, params)
         scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
         labels = cut_labels
         was_split = cut if was_split is None else was_split | cut

@@ -340,6 +340,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "after, each scored alone (a drone that hovers, then flies off).",
     ),
     ParamSpec(
+        "split_long",
+        "float",
+        4.0,
+        "Offline: a flying candidate below min_confidence that lasted at least twice this "
+        "many seconds is cut in time into pieces of about this length, each scored alone "
+        "(a 12 s pass at 10 m/s whose turns raised its median fitted acceleration to 5.8 "
+        "m/s^2); the default is min_track_seconds, so a piece is not scaled down for its "
+        "duration; 0 = off.",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
         "hover_max_extent",
         "float",
         3.0,

@@ -502,3 +502,40 @@ def split_still(
         return labels, k, np.zeros(labels.size, dtype=bool)
     labels_out, k_out = relabel_compact(out)
     return labels_out, k_out, np.isin(labels, cut)
+
+
+def split_long(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, scores: ClusterScores, params: ParamSet
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """Labels with each flying candidate below ``min_confidence`` that lasted at least
+    twice ``split_long`` seconds cut in time into equal pieces of about ``split_long``
+    seconds. Returns (compact labels, K, mask of the points that were in a cut cluster),
+    as :func:`split_merged`."""
+    labels = np.asarray(labels, dtype=np.int64)
+    k = int(labels.max()) + 1 if labels.size else 0
+    piece = float(params.split_long)
+    if piece <= 0 or not labels.size:
+        return labels, k, np.zeros(labels.size, dtype=bool)
+    duration = scores.t_last - scores.t_first
+    which = np.flatnonzero(
+        scores.candidate
+        & (scores.confidence < params.min_confidence)
+        & (scores.extent > params.hover_max_extent)
+        & (duration >= 2 * piece)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+    )
+    out = labels.copy()
+    next_label = k
+    cut = []
+    for c in which:
+        member = np.flatnonzero(labels == c)
+        tm = t[member]
+        n = int(duration[c] // piece)
+        part = np.minimum(((tm - tm.min()) / (duration[c] / n)).astype(np.int64), n - 1)
+        out[member] = next_label + part
+        next_label += n
+        cut.append(c)
+    if not cut:
+        return labels, k, np.zeros(labels.size, dtype=bool)
+    labels_out, k_out = relabel_compact(out)
+    return labels_out, k_out, np.isin(labels, cut)

@@ -19,6 +19,7 @@ from clusterfilter_ros.core.splitting import (
     merged_clusters,
     return_groups,
     split_and_score,
+    split_long,
     split_merged,
     split_still,
     still_run,
@@ -477,6 +478,33 @@ def test_split_still_leaves_confident_or_steady_clusters_alone():
     high = dataclasses.replace(scores, confidence=np.array([0.9]))
     out, k, cut = split_still(labels, xyz, t, high, params)
     assert k == 1 and not cut.any() and np.array_equal(out, labels)
+
+
+def test_split_long_cuts_a_long_unconfident_pass_into_pieces_scored_alone():
+    params = detector_params()
+    rng = np.random.default_rng(2)
+    t = np.repeat(np.arange(0.0, 12.5, 0.1), 2)
+    xyz = np.column_stack([10.0 * t, np.zeros_like(t), np.full_like(t, 30.0)])
+    xyz += rng.normal(0, 0.1, (t.size, 3))
+    labels = np.zeros(t.size, dtype=np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    low = dataclasses.replace(scores, confidence=np.array([0.5]))
+    out, k, cut = split_long(labels, xyz, t, low, params)
+    assert params.split_long == params.min_track_seconds == 4.0
+    assert k == 3 and cut.all()  # 12.4 s in three pieces of 4.1 s, in time order
+    for piece in range(3):
+        span = t[out == piece]
+        assert 4.0 <= span.max() - span.min() + 0.1 <= 4.3
+    assert np.all(np.diff(out[np.argsort(t, kind="stable")]) >= 0)
+    # Left alone: a confident cluster, one shorter than two pieces, or with the rule off.
+    for confidence, p in (
+        (0.9, params),
+        (0.5, params.copy(split_long=6.5)),
+        (0.5, params.copy(split_long=0.0)),
+    ):
+        scored = dataclasses.replace(scores, confidence=np.array([confidence]))
+        out, k, cut = split_long(labels, xyz, t, scored, p)
+        assert k == 1 and not cut.any() and np.array_equal(out, labels)
 
 
 def test_a_bird_passing_a_hovering_drone_is_split_off():
