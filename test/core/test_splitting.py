@@ -450,8 +450,9 @@ def _hover_then_fly_frames(hover_returns: int, seed: int = 0) -> list[Frame]:
 
 def test_a_drone_that_hovers_then_flies_off_is_cut_into_stay_and_flight():
     frames = _hover_then_fly_frames(hover_returns=15)
-    # As one cluster the dense stay drags the flight's density score below min_confidence.
-    whole = detect_offline(frames, detector_params({"split_still": False}))
+    # As one cluster the dense stay drags the flight's density score below min_confidence
+    # (cut into 4 s pieces, split_long, it is found too).
+    whole = detect_offline(frames, detector_params({"split_still": False, "split_long": 0.0}))
     assert len(whole.estimates) == 0
     drone = [c for c in whole.clusters if c["n_points"] > 100 and c["cz"] > 20]
     assert len(drone) == 1 and drone[0]["confidence"] < detector_params().min_confidence
@@ -461,7 +462,8 @@ def test_a_drone_that_hovers_then_flies_off_is_cut_into_stay_and_flight():
     assert np.sqrt(np.mean(np.sum((cut.estimates.xyz - truth) ** 2, axis=1))) < 0.5
     # A drone that hovers with fewer returns scores well enough whole, and is not cut.
     sparse = _hover_then_fly_frames(hover_returns=4)
-    assert len(detect_offline(sparse, detector_params({"split_still": False})).estimates) == 150
+    uncut = detector_params({"split_still": False, "split_long": 0.0})
+    assert len(detect_offline(sparse, uncut).estimates) == 150
 
 
 def test_split_still_leaves_confident_or_steady_clusters_alone():
