@@ -476,13 +476,7 @@ def split_still(
     """
     labels = np.asarray(labels, dtype=np.int64)
     k = int(labels.max()) + 1 if labels.size else 0
-    which = np.flatnonzero(
-        scores.candidate
-        & (scores.confidence < params.min_confidence)
-        & (scores.extent > params.hover_max_extent)
-        & (scores.t_last - scores.t_first >= 2 * params.hover_min_seconds)
-        & (scores.centroid[:, 2] >= params.min_centroid_z)
-    )
+    which = _unconfident_flying(scores, params, 2 * params.hover_min_seconds)
     out = labels.copy()
     next_label = k
     cut = []
@@ -498,10 +492,7 @@ def split_still(
         out[member] = next_label + part
         next_label += 3
         cut.append(c)
-    if not cut:
-        return labels, k, np.zeros(labels.size, dtype=bool)
-    labels_out, k_out = relabel_compact(out)
-    return labels_out, k_out, np.isin(labels, cut)
+    return _cut_labels(labels, out, k, cut)
 
 
 def split_long(
@@ -517,13 +508,7 @@ def split_long(
     if piece <= 0 or not labels.size:
         return labels, k, np.zeros(labels.size, dtype=bool)
     duration = scores.t_last - scores.t_first
-    which = np.flatnonzero(
-        scores.candidate
-        & (scores.confidence < params.min_confidence)
-        & (scores.extent > params.hover_max_extent)
-        & (duration >= 2 * piece)
-        & (scores.centroid[:, 2] >= params.min_centroid_z)
-    )
+    which = _unconfident_flying(scores, params, 2 * piece)
     out = labels.copy()
     next_label = k
     cut = []
@@ -535,6 +520,26 @@ def split_long(
         out[member] = next_label + part
         next_label += n
         cut.append(c)
+    return _cut_labels(labels, out, k, cut)
+
+
+def _unconfident_flying(scores: ClusterScores, params: ParamSet, duration: float) -> np.ndarray:
+    """Ids of the candidates below ``min_confidence`` wider than ``hover_max_extent``
+    (flying), at or above ``min_centroid_z``, that lasted at least ``duration`` s."""
+    return np.flatnonzero(
+        scores.candidate
+        & (scores.confidence < params.min_confidence)
+        & (scores.extent > params.hover_max_extent)
+        & (scores.t_last - scores.t_first >= duration)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+    )
+
+
+def _cut_labels(
+    labels: np.ndarray, out: np.ndarray, k: int, cut: list[int]
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """(compact labels, K, mask of the points of the ``cut`` clusters) after cutting
+    ``labels`` (K = ``k``) into ``out``; ``labels`` unchanged if nothing was cut."""
     if not cut:
         return labels, k, np.zeros(labels.size, dtype=bool)
     labels_out, k_out = relabel_compact(out)
