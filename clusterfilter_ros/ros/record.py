@@ -29,10 +29,11 @@ POSE_TOPIC = "/uav/pose"
 POINTS_TOPIC = "/uav/points"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 
-#: Recorder subscriptions: reliable, keep last 100 (poses are small; none should be lost).
+#: Recorder subscriptions: reliable, keep last 500 (poses are small; none should be lost,
+#: and /uav/pose_delayed publishes up to a few hundred at once at a confirmation).
 RECORD_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=100,
+    depth=500,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
