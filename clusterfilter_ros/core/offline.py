@@ -616,13 +616,15 @@ def detect_offline(
             two_trackers=True,
             apart=params.split_apart,
         )
-    if params.split_still:
-        cut_labels, k, cut = split_still(labels, xyz, t, scores, params)
-        scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
-        labels = cut_labels
-        was_split = cut if was_split is None else was_split | cut
-    if params.split_long > 0:
-        cut_labels, k, cut = split_long(labels, xyz, t, scores, params)
+    # Unconfident clusters cut in time, each piece scored alone: a hover then a flight,
+    # then a long pass in pieces (deviation 90).
+    for enabled, cut_in_time in (
+        (params.split_still, split_still),
+        (params.split_long > 0, split_long),
+    ):
+        if not enabled:
+            continue
+        cut_labels, k, cut = cut_in_time(labels, xyz, t, scores, params)
         scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
         labels = cut_labels
         was_split = cut if was_split is None else was_split | cut

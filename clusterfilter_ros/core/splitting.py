@@ -476,7 +476,7 @@ def split_still(
     """
     labels = np.asarray(labels, dtype=np.int64)
     k = int(labels.max()) + 1 if labels.size else 0
-    which = _unconfident_flying(scores, params, 2 * params.hover_min_seconds)
+    which = _cuttable_in_time(scores, params, 2 * params.hover_min_seconds)
     out = labels.copy()
     next_label = k
     cut = []
@@ -508,7 +508,7 @@ def split_long(
     if piece <= 0 or not labels.size:
         return labels, k, np.zeros(labels.size, dtype=bool)
     duration = scores.t_last - scores.t_first
-    which = _unconfident_flying(scores, params, 2 * piece)
+    which = _cuttable_in_time(scores, params, 2 * piece)
     out = labels.copy()
     next_label = k
     cut = []
@@ -523,9 +523,10 @@ def split_long(
     return _cut_labels(labels, out, k, cut)
 
 
-def _unconfident_flying(scores: ClusterScores, params: ParamSet, duration: float) -> np.ndarray:
-    """Ids of the candidates below ``min_confidence`` wider than ``hover_max_extent``
-    (flying), at or above ``min_centroid_z``, that lasted at least ``duration`` s."""
+def _cuttable_in_time(scores: ClusterScores, params: ParamSet, duration: float) -> np.ndarray:
+    """Ids of the clusters :func:`split_still` and :func:`split_long` may cut in time:
+    candidates below ``min_confidence``, wider than ``hover_max_extent``, at or above
+    ``min_centroid_z``, that lasted at least ``duration`` s."""
     return np.flatnonzero(
         scores.candidate
         & (scores.confidence < params.min_confidence)

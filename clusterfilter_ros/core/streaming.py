@@ -934,7 +934,6 @@ class StreamingDetector:
         lagged = self._lagged
         wait_until = until - p.report_backfill
         tracks: list[_TrackPiece] | None = None  # built once for all frames released here
-        self._resolve_held(until)
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             stamp = lagged[0]
             if self._last_live < stamp and stamp > wait_until and len(lagged) <= _MAX_LAGGED:
