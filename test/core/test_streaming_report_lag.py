@@ -28,6 +28,12 @@ def _push_all(frames, det):
     return live, delayed, released_at
 
 
+def _drone_gone_after(frames: list[Frame], stamp: float) -> list[Frame]:
+    """The scene's frames with the drone's returns (the last three of each frame of a
+    ``drone_points=3`` scene) removed after ``stamp``."""
+    return [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > stamp else f for f in frames]
+
+
 def test_delayed_estimates_cover_the_warm_up_and_follow_the_drone(scene, drone_path_fn):
     frames, _, _ = scene(duration=10.0, wall_points=400)
     det = StreamingDetector(detector_params({"report_lag": LAG, "report_backfill": 0.0}))
@@ -58,7 +64,7 @@ def test_delayed_estimates_cover_the_warm_up_and_follow_the_drone(scene, drone_p
 def test_nothing_is_reported_late_after_the_newest_live_estimate(scene):
     # The drone's returns stop at 6 s; the stream goes on to 10 s.
     frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
-    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1006.0 else f for f in frames]
+    frames = _drone_gone_after(frames, 1006.0)
     det = StreamingDetector(detector_params({"report_lag": LAG}))
     live, delayed, _ = _push_all(frames, det)
     delayed += det.flush()
@@ -72,7 +78,7 @@ def test_an_object_confirmed_only_after_its_returns_stopped_is_not_reported_late
     # 4.6 s: the first re-clustering finds its track already 0.6 s old, too old for
     # push() to report (max_extrapolation 0.5 s), so the delayed output stays silent too.
     frames, _, _ = scene(duration=8.0, wall_points=200, drone_points=3)
-    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1004.0 else f for f in frames]
+    frames = _drone_gone_after(frames, 1004.0)
     values = {"report_lag": 3.0, "warmup": 4.6}
     det = StreamingDetector(detector_params(values))
     live, delayed, _ = _push_all(frames, det)
@@ -343,7 +349,7 @@ def test_a_drone_that_went_silent_is_reported_late_up_to_its_last_returns(scene,
     # the frames of its last seconds are 12 s old: they take the lost track's kept
     # samples (without them, nothing after 3 s would be reported late).
     frames, _, _ = scene(duration=20.0, wall_points=200, drone_points=3)
-    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1006.0 else f for f in frames]
+    frames = _drone_gone_after(frames, 1006.0)
     det, delayed = _delayed_run(frames, 12.0)
     last_live = det._last_live
     assert 1006.0 <= last_live <= 1006.6
@@ -465,7 +471,7 @@ def test_an_object_reported_live_for_a_moment_is_not_reported_over_its_history(s
     # The drone's returns stop at 4.2 s, just after the warm-up: the live output reports
     # it from 4.0 to 4.7 s (0.7 s, coasting max_extrapolation past its last return).
     frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
-    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1004.2 else f for f in frames]
+    frames = _drone_gone_after(frames, 1004.2)
     late = {}
     for shortest in (0.0, 1.0):
         values = {"report_lag": 3.0, "warmup": 4.0, "report_lag_min_run": shortest}
@@ -583,7 +589,7 @@ def test_frames_wait_at_most_report_backfill_when_nothing_is_confirmed():
 
 def test_an_object_confirmed_after_its_returns_stopped_stays_unreported_with_backfill(scene):
     frames, _, _ = scene(duration=8.0, wall_points=200, drone_points=3)
-    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1004.0 else f for f in frames]
+    frames = _drone_gone_after(frames, 1004.0)
     values = {"report_lag": 3.0, "warmup": 4.6, "report_backfill": 5.0}
     det = StreamingDetector(detector_params(values))
     live, delayed, _ = _push_all(frames, det)
@@ -597,7 +603,7 @@ def test_a_track_reported_live_for_a_moment_is_not_backfilled(scene):
     frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
     first_live = min(e.stamp for e in run_streaming(frames))
     cut = first_live + 1.0
-    frames = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > cut else f for f in frames]
+    frames = _drone_gone_after(frames, cut)
     values = {"report_lag": LAG, "report_backfill": 5.0, "report_backfill_min_run": 2.0}
     live = run_streaming(frames)
     assert min(e.stamp for e in live) == first_live
@@ -613,7 +619,7 @@ def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
     # pass's drone vanishes at 5 s, so its later frames fall due with nothing reported
     # live; that must not make the second pass's frames count as waiting ones.
     frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
-    gone = [Frame(f.stamp, f.sensor, f.xyz[:-3]) if f.stamp > 1005.0 else f for f in frames]
+    gone = _drone_gone_after(frames, 1005.0)
     values = {"report_lag": LAG, "report_backfill": 5.0}
     _, fresh, fresh_at = _push_all(frames, StreamingDetector(detector_params(values)))
     det = StreamingDetector(detector_params(values))
