@@ -1099,6 +1099,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "report_head_gap",
+        "float",
+        0.5,
+        "report_lag: the late output leaves out a track's returns before a gap longer than "
+        "this (s) where one object could not have gone on from them to the rest (the lines "
+        "at the gap's two sides do not meet) and the live output never reported them: "
+        "another object's returns the clustering joined to the drone's.",
+        minimum=0.05,
+        maximum=60.0,
+    ),
+    ParamSpec(
         "report_lag_min_run",
         "float",
         0.5,

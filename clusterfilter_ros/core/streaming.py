@@ -1040,9 +1040,10 @@ class StreamingDetector:
         """The tracks delayed estimates come from, in order of preference: the current
         track while it is confident, then the kept pieces newest first (a track cut off
         by a later re-clustering, or lost); each preceded by the older
-        pieces it continues (:func:`_continues`), without samples of another object
-        before it (:meth:`_without_unreported_head`) and without its lone stray samples
-        (:func:`_stray_samples`; once here for all the frames released together). A kept
+        pieces it continues (:func:`_continues`), without its lone stray samples
+        (:func:`_stray_samples`) and then without samples of another object before it
+        (:meth:`_without_unreported_head`: a stray would bend the line the gap next to it
+        is judged by); once here for all the frames released together. A kept
         piece serves only frames up to the newest stamp at which the live output reported
         a position on it."""
         p = self.params
@@ -1071,17 +1072,19 @@ class StreamingDetector:
                     chain.confidence,
                     max(chain.reported_until, piece.reported_until),
                 )
-            chains.append(_without_strays(self._without_unreported_head(chain), p))
+            chains.append(self._without_unreported_head(_without_strays(chain, p)))
         return chains
 
     def _without_unreported_head(self, chain: _TrackPiece) -> _TrackPiece:
-        """``chain`` without its samples before the newest gap longer than ``max_gap``
-        across which the object could not have gone on (:func:`_could_continue`) and
-        before which the live output never reported it (:meth:`_reported_until`): a
-        re-clustering's linking can join another object's earlier returns to the
-        drone's cluster, and the late output then reported them (deviation 85)."""
+        """``chain`` without its samples before the newest gap longer than
+        ``report_head_gap`` across which the object could not have gone on
+        (:func:`_could_continue`) and before which the live output never reported it
+        (:meth:`_reported_until`): a re-clustering's linking can join another object's
+        earlier returns to the drone's cluster, and the late output then reported them
+        (deviation 85; since deviation 91 also at gaps shorter than ``max_gap``: a bird's
+        returns 0.9 s before the drone's first, in the cluster confirmed later)."""
         p = self.params
-        for k in np.flatnonzero(np.diff(chain.ts) > p.max_gap)[::-1] + 1:
+        for k in np.flatnonzero(np.diff(chain.ts) > p.report_head_gap)[::-1] + 1:
             earlier = _TrackPiece(chain.ts[:k], chain.ps[:k], chain.ws[:k], 0.0)
             later = _TrackPiece(chain.ts[k:], chain.ps[k:], chain.ws[k:], 0.0)
             if _could_continue(earlier, later, p) or self._reported_until(earlier) > -math.inf:

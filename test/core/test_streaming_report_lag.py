@@ -259,6 +259,41 @@ def test_another_objects_returns_before_the_track_are_not_reported_late():
     np.testing.assert_array_equal(det._without_unreported_head(own).ts, ts)
 
 
+def test_a_bird_that_met_the_drones_path_is_cut_at_a_gap_shorter_than_max_gap():
+    # A bird flying across (5 m/s along y, 8 m off) for 1 s, then the drone's own returns
+    # 0.8 s later (default 3003 of the twenty-ninth set: the late output reported the
+    # bird, which the live output never did, for 2 s): the gap is under max_gap (1 s) but
+    # over report_head_gap (0.5 s), and the lines at its sides do not meet.
+    head_t, drone_t = np.arange(0.0, 1.0, 0.1), np.arange(1.7, 4.0, 0.1)
+    n = head_t.size
+    bird = np.stack([np.full(n, -4.6), 1.3 + 5.0 * (head_t - 1.7), np.full(n, 10.0)], axis=1)
+    ts = np.concatenate([head_t, drone_t])
+    chain = _piece(ts, np.concatenate([bird, _line(drone_t)]), conf=0.8)
+    det = _detector_with([])
+    assert ts[head_t.size] - ts[head_t.size - 1] < det.params.max_gap
+    np.testing.assert_array_equal(det._without_unreported_head(chain).ts, drone_t)
+    # report_head_gap 1 s, as before deviation 91: kept.
+    det.update_params({"report_head_gap": 1.0})
+    np.testing.assert_array_equal(det._without_unreported_head(chain).ts, ts)
+
+
+def test_a_stray_beside_a_gap_does_not_cut_the_drones_own_head():
+    # The drone's own returns with a 0.75 s gap; the sample just before the gap is a lone
+    # return of something else 4 m off, which bent the earlier side's line enough that
+    # the two sides seemed not to meet (default 2800 of the twenty-eighth set). Strays go
+    # first, so the drone's head is kept.
+    ts = np.concatenate([np.arange(0.0, 1.4, 0.1), [1.45], np.arange(2.2, 4.0, 0.1)])
+    ps = _line(ts)
+    ps[14] += [0.0, 0.0, 4.0]
+    chain = _piece(ts, ps, conf=0.8)
+    det = _detector_with([])
+    tracks = _detector_with([chain])._delayed_tracks()
+    assert len(tracks) == 1
+    np.testing.assert_array_equal(tracks[0].ts, np.delete(ts, 14))
+    # Judged with the stray in place, the head would have been cut.
+    assert det._without_unreported_head(chain).ts[0] > 1.0
+
+
 def _detector_with(archive, track_t=None):
     # No live run length rule: these detectors have no record of live estimates.
     det = StreamingDetector(detector_params({"report_lag": 5.0, "report_lag_min_run": 0.0}))
