@@ -659,6 +659,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "stream_split_excess_residual",
+        "float",
+        1.0,
+        "Streaming: split_excess_residual for the local history, for clusters of at least "
+        "3 x stream_min_cluster_points points (a sparser cluster's excess residual is the "
+        "scatter of a return or two per window); offline's 0.3 m let single birds of a "
+        "split flock be reported live; 0 = off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "stream_split_min_extent",
         "float",
         2.5,

@@ -262,6 +262,7 @@ def merged_clusters(
     params: ParamSet,
     min_extent: float | None = None,
     excess_residual: float = 0.0,
+    excess_min_points: int = 0,
 ) -> np.ndarray:
     """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
     high), with at least twice ``min_cluster_points`` and at most ``max_cluster_points``
@@ -271,14 +272,18 @@ def merged_clusters(
     the drone make a cluster narrow enough to pass the extent gate, which then fails on
     its smoothness), or, with ``excess_residual`` > 0, below ``min_confidence`` with a
     larger excess residual, however narrow (a bird's returns joined to a drone's
-    track, offline's ``split_excess_residual``; deviation 74)."""
+    track, offline's ``split_excess_residual``, deviation 74; streaming's
+    ``stream_split_excess_residual`` only for clusters of at least ``excess_min_points``
+    points, deviation 92)."""
     if min_extent is None:
         min_extent = params.split_min_extent
     wide = scores.local_extent > params.max_local_extent
     wide |= (scores.local_extent > min_extent) & (scores.confidence < params.min_confidence)
     if excess_residual > 0:
-        wide |= (scores.excess_residual > excess_residual) & (
-            scores.confidence < params.min_confidence
+        wide |= (
+            (scores.excess_residual > excess_residual)
+            & (scores.confidence < params.min_confidence)
+            & (scores.n_points >= excess_min_points)
         )
     return np.nonzero(wide & _flying(scores, params))[0]
 
@@ -302,11 +307,12 @@ def split_merged(
     structure_keys: np.ndarray | None = None,
     min_extent: float | None = None,
     excess_residual: float = 0.0,
+    excess_min_points: int = 0,
     cascade: bool = False,
     also: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray]:
-    """Labels with each of :func:`merged_clusters` (``min_extent`` and
-    ``excess_residual`` passed on), and each cluster in ``also``, replaced by its
+    """Labels with each of :func:`merged_clusters` (``min_extent``, ``excess_residual``
+    and ``excess_min_points`` passed on), and each cluster in ``also``, replaced by its
     kinematic tracks (``cascade``: :func:`kinematic_tracks`'s).
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
@@ -316,7 +322,7 @@ def split_merged(
     K, (N,) bool mask of the points that were in a split cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
-    split = merged_clusters(scores, params, min_extent, excess_residual)
+    split = merged_clusters(scores, params, min_extent, excess_residual, excess_min_points)
     k = int(labels.max()) + 1 if labels.size else 0
     if also is not None and len(also):
         split = np.union1d(split, np.asarray(also, dtype=split.dtype))
@@ -356,6 +362,7 @@ def split_and_score(
     structure_keys: np.ndarray | None = None,
     min_extent: float | None = None,
     excess_residual: float = 0.0,
+    excess_min_points: int = 0,
     two_trackers: bool = False,
     apart: float = 0.0,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
@@ -369,10 +376,20 @@ def split_and_score(
     higher (:func:`_reportable_rank`). Returns (labels, K, scores, mask of the points
     that were in a split cluster).
     """
-    args = (labels, xyz, t, scores, params, structure_keys, min_extent, excess_residual)
+    args = (
+        labels,
+        xyz,
+        t,
+        scores,
+        params,
+        structure_keys,
+        min_extent,
+        excess_residual,
+        excess_min_points,
+    )
     also = None
     if apart > 0:
-        merged = merged_clusters(scores, params, min_extent, excess_residual)
+        merged = merged_clusters(scores, params, min_extent, excess_residual, excess_min_points)
         also = crossed_clusters(labels, xyz, t, scores, params, apart, merged)
     out, k, was_split = split_merged(*args, also=also)
     pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)

@@ -1175,6 +1175,8 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             scorer,
             structure,
             p.stream_split_min_extent,
+            excess_residual=p.stream_split_excess_residual,
+            excess_min_points=3 * ps.min_cluster_points,
             apart=p.split_apart,
         )
     chosen = select_clusters(scores, ps)

@@ -54,6 +54,25 @@ def test_streaming_scores_with_its_own_smallest_cluster(scene):
     assert stream_too == []
 
 
+def test_streaming_splits_a_narrow_irregular_cluster_with_its_own_bound(scene, monkeypatch):
+    # Deviation 92: the re-clusterings pass stream_split_excess_residual, and at least
+    # three times stream_min_cluster_points, to the split of merged clusters.
+    from clusterfilter_ros.core import streaming
+
+    seen = []
+    real = streaming.split_and_score
+
+    def spy(*args, **kwargs):
+        seen.append((kwargs["excess_residual"], kwargs["excess_min_points"]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(streaming, "split_and_score", spy)
+    frames, _, _ = scene(duration=4.0, wall_points=100)
+    values = {"stream_split_excess_residual": 0.7, "stream_min_cluster_points": 12}
+    run_streaming(frames, detector_params(values))
+    assert seen and set(seen) == {(0.7, 36)}
+
+
 def test_drone_free_stream_is_quiet(scene):
     frames, _, _ = scene(duration=8.0, drone=False, wall_points=400)
     assert run_streaming(frames) == []

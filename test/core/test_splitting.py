@@ -316,11 +316,11 @@ def test_narrower_clusters_are_split_only_when_they_fail_as_a_whole():
     assert merged_clusters(scores, params, min_extent=0.3).tolist() == [0, 2, 3]
 
 
-def test_a_narrow_cluster_failing_on_its_residual_is_split_only_offline():
+def test_a_narrow_cluster_failing_on_its_residual_is_split_when_the_caller_asks():
     # Deviation 74: a bird's returns joined to a drone's whole track leave the cluster
     # narrow (0.5 m) but irregular; below min_confidence with an excess residual over
-    # split_excess_residual it is split when the caller passes that bound (offline);
-    # without it (streaming) it is left whole.
+    # split_excess_residual it is split when the caller passes that bound (offline, and
+    # streaming with its own bound since deviation 92); without it, it is left whole.
     params = detector_params()
     xyz, t, _ = _merged_scene()
     labels = np.repeat(np.arange(3), int(np.ceil(t.size / 3)))[: t.size]
@@ -335,6 +335,13 @@ def test_a_narrow_cluster_failing_on_its_residual_is_split_only_offline():
     )
     assert merged_clusters(scores, params).tolist() == []
     assert merged_clusters(scores, params, excess_residual=bound).tolist() == [0]
+    # Streaming asks for at least excess_min_points points (deviation 92): a sparse
+    # cluster's excess residual is the scatter of a return or two per window.
+    n = int(scores.n_points[0])
+    assert merged_clusters(scores, params, excess_residual=bound, excess_min_points=n).tolist() == [
+        0
+    ]
+    assert merged_clusters(scores, params, excess_residual=bound, excess_min_points=n + 1).size == 0
 
 
 def _drone_with_bird_below(duration: float, below: float):
