@@ -338,10 +338,8 @@ def test_a_narrow_cluster_failing_on_its_residual_is_split_when_the_caller_asks(
     # Streaming asks for at least excess_min_points points (deviation 92): a sparse
     # cluster's excess residual is the scatter of a return or two per window.
     n = int(scores.n_points[0])
-    assert merged_clusters(scores, params, excess_residual=bound, excess_min_points=n).tolist() == [
-        0
-    ]
-    assert merged_clusters(scores, params, excess_residual=bound, excess_min_points=n + 1).size == 0
+    assert merged_clusters(scores, params, None, bound, n).tolist() == [0]
+    assert merged_clusters(scores, params, None, bound, n + 1).size == 0
 
 
 def _drone_with_bird_below(duration: float, below: float):
