@@ -1105,7 +1105,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "report_backfill: the frames before a confirmation are reported late only once the "
         "live output's run of estimates (each within max_gap of the one before) that began "
         "with it has lasted this long (s): a bird leg reported live for a moment is not "
-        "reported over its whole history.",
+        "reported over its whole history. report_lag: a track a re-clustering rejects is "
+        "still reported late, up to its newest live estimate, if the live output reported "
+        "it over at least this long.",
         minimum=0.0,
         maximum=60.0,
     ),

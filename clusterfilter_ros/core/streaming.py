@@ -676,15 +676,20 @@ class StreamingDetector:
         """After the re-clustering of stream time ``now`` replaced the reported track
         ``old_track``: keep its samples older than the new track's first one for the frames
         still waiting for their delayed estimate (report_lag), which the new track may no
-        longer reach. A track dropped (no confident track after it) is kept only if it was
+        longer reach. A track dropped (no confident track after it) is kept if it was
         lost: its newest return more than ``reacquire_window`` old, so that nothing was
         left to re-acquire. One dropped sooner was rejected by the re-clustering: it is
-        forgotten, and the pieces kept before it with it."""
+        forgotten, and the pieces kept before it with it, unless push() had reported it
+        over at least ``report_backfill_min_run`` (:meth:`_reported_span`; deviation 93:
+        a drone the live output held for seconds and lost to a re-clustering that no
+        longer trusted its newest returns)."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
         if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
-            self._archive.clear()
-            return
+            whole = _TrackPiece(*_sample_arrays(sorted(old_track, key=lambda s: s.t)), confidence)
+            if self._reported_span(whole) < p.report_backfill_min_run:
+                self._archive.clear()
+                return
         first = min((s.t for s in self._track), default=math.inf) if current else math.inf
         kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
         if kept:
@@ -692,6 +697,22 @@ class StreamingDetector:
             until = self._reported_until(piece)
             self._archive.append(dataclasses.replace(piece, reported_until=until))
         self._prune_archive()
+
+    def _reported_span(self, piece: _TrackPiece) -> float:
+        """Seconds from the first to the last stamp at which push() reported a position
+        within ``track_gate`` of the piece's own (:func:`smoothed_position`) there; -inf
+        if it never did."""
+        p = self.params
+        hits = []
+        for stamp, position in self._live_reports:
+            if not piece.ts[0] - p.max_extrapolation <= stamp <= piece.ts[-1] + p.max_extrapolation:
+                continue
+            own = smoothed_position(piece.ts, piece.ps, piece.ws, stamp, p)
+            if own is None:
+                continue
+            if float(np.linalg.norm(reported_positions(own, p)[0] - position)) <= p.track_gate:
+                hits.append(stamp)
+        return max(hits) - min(hits) if hits else -math.inf
 
     def _reported_until(self, piece: _TrackPiece) -> float:
         """The newest stamp at which push() reported a position within ``track_gate`` of
