@@ -681,8 +681,8 @@ class StreamingDetector:
         left to re-acquire. One dropped sooner was rejected by the re-clustering: it is
         forgotten, and the pieces kept before it with it, unless push() had reported it
         over at least ``report_backfill_min_run`` (:meth:`_reported_span`; deviation 93:
-        a drone the live output held for seconds and lost to a re-clustering that no
-        longer trusted its newest returns)."""
+        what the live output held for seconds is not taken back from the late output by a
+        later re-clustering)."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
         if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
