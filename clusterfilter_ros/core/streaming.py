@@ -46,7 +46,7 @@ import functools
 import math
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from concurrent import futures
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -685,50 +685,47 @@ class StreamingDetector:
         later re-clustering)."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
-        if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
-            whole = _TrackPiece(*_sample_arrays(sorted(old_track, key=lambda s: s.t)), confidence)
-            if self._reported_span(whole) < p.report_backfill_min_run:
-                self._archive.clear()
-                return
         first = min((s.t for s in self._track), default=math.inf) if current else math.inf
         kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
-        if kept:
-            piece = _TrackPiece(*_sample_arrays(kept), confidence)
+        piece = _TrackPiece(*_sample_arrays(kept), confidence) if kept else None
+        if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
+            # Rejected (with no current track, ``piece`` holds all of ``old_track``).
+            if piece is None or self._reported_span(piece) < p.report_backfill_min_run:
+                self._archive.clear()
+                return
+        if piece is not None:
             until = self._reported_until(piece)
             self._archive.append(dataclasses.replace(piece, reported_until=until))
         self._prune_archive()
 
-    def _reported_span(self, piece: _TrackPiece) -> float:
-        """Seconds from the first to the last stamp at which push() reported a position
-        within ``track_gate`` of the piece's own (:func:`smoothed_position`) there; -inf
-        if it never did."""
+    def _reported_stamps(self, piece: _TrackPiece, newest_first: bool) -> Iterator[float]:
+        """The stamps at which push() reported a position within ``track_gate`` of the
+        piece's own (:func:`smoothed_position`) there: newest first, stopping at the first
+        report before the piece's reach, or all of them in push order."""
         p = self.params
-        hits = []
-        for stamp, position in self._live_reports:
-            if not piece.ts[0] - p.max_extrapolation <= stamp <= piece.ts[-1] + p.max_extrapolation:
+        lo, hi = piece.ts[0] - p.max_extrapolation, piece.ts[-1] + p.max_extrapolation
+        reports = reversed(self._live_reports) if newest_first else iter(self._live_reports)
+        for stamp, position in reports:
+            if newest_first and stamp < lo:
+                return
+            if not lo <= stamp <= hi:
                 continue
             own = smoothed_position(piece.ts, piece.ps, piece.ws, stamp, p)
             if own is None:
                 continue
             if float(np.linalg.norm(reported_positions(own, p)[0] - position)) <= p.track_gate:
-                hits.append(stamp)
+                yield stamp
+
+    def _reported_span(self, piece: _TrackPiece) -> float:
+        """Seconds from the first to the last of the piece's :meth:`_reported_stamps`;
+        -inf if there is none."""
+        hits = list(self._reported_stamps(piece, newest_first=False))
         return max(hits) - min(hits) if hits else -math.inf
 
     def _reported_until(self, piece: _TrackPiece) -> float:
         """The newest stamp at which push() reported a position within ``track_gate`` of
         the piece's own (:func:`smoothed_position`) there, or -inf."""
-        p = self.params
-        for stamp, position in reversed(self._live_reports):
-            if stamp > piece.ts[-1] + p.max_extrapolation:
-                continue
-            if stamp < piece.ts[0] - p.max_extrapolation:
-                break
-            own = smoothed_position(piece.ts, piece.ps, piece.ws, stamp, p)
-            if own is None:
-                continue
-            if float(np.linalg.norm(reported_positions(own, p)[0] - position)) <= p.track_gate:
-                return stamp
-        return -math.inf
+        return next(self._reported_stamps(piece, newest_first=True), -math.inf)
 
     def _prune_archive(self) -> None:
         """Forget the archived pieces no frame still waiting (stamped at most

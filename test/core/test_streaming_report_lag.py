@@ -423,26 +423,21 @@ def test_a_rejected_track_the_live_output_held_for_seconds_is_kept():
     # Deviation 93: rejected 1.5 s after its newest return, but reported live over 2 s
     # (report_backfill_min_run) of it: its samples stay, up to the newest live estimate.
     old = _old_track(np.arange(1.0, 4.9, 0.1))  # newest return at 4.8 s
-    det = _detector_with([])
-    det._live_reports.extend((t, _line(np.array([t]))[0]) for t in np.arange(2.5, 4.55, 0.1))
-    det._now = 4.8 + 1.5
-    det._archive_piece(old, 0.8, det._now)
-    assert len(det._archive) == 1
-    assert abs(det._archive[0].reported_until - 4.5) < 1e-9
+
+    def archive_after_live(report_t, offset=(0.0, 0.0, 0.0)):
+        det = _detector_with([])
+        det._live_reports.extend((t, _line(np.array([t]))[0] + offset) for t in report_t)
+        det._now = 4.8 + 1.5
+        det._archive_piece(old, 0.8, det._now)
+        return det._archive
+
+    archive = archive_after_live(np.arange(2.5, 4.55, 0.1))
+    assert len(archive) == 1
+    assert abs(archive[0].reported_until - 4.5) < 1e-9
     # Reported live over 1 s only: forgotten, as before.
-    det = _detector_with([])
-    det._live_reports.extend((t, _line(np.array([t]))[0]) for t in np.arange(3.5, 4.55, 0.1))
-    det._now = 4.8 + 1.5
-    det._archive_piece(old, 0.8, det._now)
-    assert len(det._archive) == 0
+    assert len(archive_after_live(np.arange(3.5, 4.55, 0.1))) == 0
     # Reported over 2 s, but 8 m off the track (another object): forgotten.
-    det = _detector_with([])
-    det._live_reports.extend(
-        (t, _line(np.array([t]))[0] + [0.0, 8.0, 0.0]) for t in np.arange(2.5, 4.55, 0.1)
-    )
-    det._now = 4.8 + 1.5
-    det._archive_piece(old, 0.8, det._now)
-    assert len(det._archive) == 0
+    assert len(archive_after_live(np.arange(2.5, 4.55, 0.1), (0.0, 8.0, 0.0))) == 0
 
 
 # --------------------------------------------------------------- smoothed_position
