@@ -443,6 +443,7 @@ def extend_track(
     pool: np.ndarray,
     params: ParamSet,
     short_gap: np.ndarray | None = None,
+    grow_end: bool = True,
 ) -> np.ndarray:
     """Grow a selected track at both ends with points of ``pool`` where it was heading.
 
@@ -465,7 +466,7 @@ def extend_track(
     farther out (:func:`_near_line`) at a spot that returned nothing else a second
     before or after (:func:`_seen_again`).
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
-    the end. Returns the new member mask.
+    the end. ``grow_end`` False: grow the start only. Returns the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
@@ -484,7 +485,7 @@ def extend_track(
     hover_gap = float(params.extend_hover_gap)
     far_gap = float(params.extend_far_gap)
     viewpoint = np.asarray(params.viewpoint, dtype=np.float64)
-    for forward in (True, False):
+    for forward in (True, False) if grow_end else (False,):
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
         while True:

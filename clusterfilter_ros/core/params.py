@@ -1123,6 +1123,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "report_extend_head",
+        "bool",
+        True,
+        "report_lag: the late output also reports the reported track's earlier returns that "
+        "the clustering left as noise or in clusters too small to score, found by growing "
+        "the track back in time as offline does (across gaps up to extend_max_gap, or "
+        "extend_hover_gap for a hovering start; not extend_far_gap): a far approach gives "
+        "a return or two a second. The live output does not use them; false = off.",
+    ),
+    ParamSpec(
         "report_lag_min_run",
         "float",
         0.5,

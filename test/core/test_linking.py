@@ -118,6 +118,21 @@ def test_extend_track_takes_points_on_the_path_only():
     assert not out[-1]
 
 
+def test_extend_track_without_grow_end_grows_the_start_only():
+    rng = np.random.default_rng(5)
+    xyz, t, _ = _fragments(rng, [1.0], length=1.0)
+    # Lone returns on the path 0.4 s before the track's first and after its last.
+    extra_t = np.array([0.6, 2.3])
+    extra = np.array([[8.0 * 0.6, 0.0, 20.0], [8.0 * 2.3, 0.0, 20.0]])
+    all_xyz, all_t = np.concatenate([xyz, extra]), np.concatenate([t, extra_t])
+    member = np.arange(all_t.size) < t.size
+    both = extend_track(member, all_xyz, all_t, ~member, detector_params())
+    assert both[-2] and both[-1]
+    start = extend_track(member, all_xyz, all_t, ~member, detector_params(), grow_end=False)
+    assert start[-2] and not start[-1]
+    assert start[: t.size].all()
+
+
 def test_fill_track_takes_returns_inside_its_gaps_on_its_path_only():
     # A drone hovering at (5, 5, 15), kept by the clusterer at 0-2 s and 5.5-7 s; single
     # returns at 3 s and 4.2 s (inside a 3.5 s gap), one 6 m off, one after the track.

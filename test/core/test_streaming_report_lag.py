@@ -620,6 +620,48 @@ def test_with_report_backfill_a_late_confirmed_drone_is_reported_from_its_first_
         np.testing.assert_array_equal(by_stamp[e.stamp], e.position)
 
 
+def _sparse_head(frames: list[Frame], until: float, every: int) -> list[Frame]:
+    """The scene's frames (``drone_points=3``) with the drone's returns before ``until``
+    cut to one Mid360 return every ``every`` frame periods: a far approach, too sparse for
+    the clustering to keep."""
+    out = []
+    for i, f in enumerate(frames):
+        if f.stamp < until:
+            keep = f.sensor == MID360 and (i // 2) % every == 0
+            f = Frame(f.stamp, f.sensor, f.xyz[:-2] if keep else f.xyz[:-3])
+        out.append(f)
+    return out
+
+
+def test_the_late_output_reaches_back_over_a_sparse_head(scene, drone_path_fn):
+    # One return every 0.8 s for the first 4 s, then three a frame: the clustered track
+    # begins at about 3.5 s; grown back (report_extend_head) it reaches the start.
+    frames, _, _ = scene(duration=10.0, wall_points=400)
+    frames = _sparse_head(frames, 1004.0, every=8)
+    runs = {}
+    for grow in (False, True):
+        det = StreamingDetector(detector_params({"report_lag": LAG, "report_extend_head": grow}))
+        live, delayed, _ = _push_all(frames, det)
+        runs[grow] = (live, delayed + det.flush())
+    (live_off, late_off), (live_on, late_on) = runs[False], runs[True]
+    assert min(e.stamp for e in late_off) > 1003.0
+    assert min(e.stamp for e in late_on) <= 1000.1
+    stamps = np.array([e.stamp for e in late_on])
+    truth = drone_path_fn(stamps - 1000.0)
+    err = np.linalg.norm(np.array([e.position for e in late_on]) - truth, axis=1)
+    assert err.max() < 1.0 and np.sqrt(np.mean(err**2)) < 0.5
+    # Where both report, away from the clustered track's start (whose estimates now have
+    # samples on both sides), the same estimate; the live output does not use the head.
+    by_stamp = {e.stamp: e.position for e in late_on}
+    start = min(e.stamp for e in late_off)
+    for e in late_off:
+        if e.stamp > start + 1.0:
+            np.testing.assert_array_equal(by_stamp[e.stamp], e.position)
+    assert [(e.stamp, e.position.tolist()) for e in live_on] == [
+        (e.stamp, e.position.tolist()) for e in live_off
+    ]
+
+
 def test_report_backfill_leaves_the_live_output_alone(scene):
     frames, _, _ = scene(duration=7.0, wall_points=200)
     base = run_streaming(frames)
