@@ -133,8 +133,7 @@ class _TrackPiece:
     ps: np.ndarray  # (S, 3) float64 positions
     ws: np.ndarray  # (S,) float64 point counts
     confidence: float
-    # Newest stamp at which push() reported a position on this track (inf: the current
-    # track, which the detector-wide _last_live rule covers).
+    # Newest stamp at which push() reported a position on this track (inf: not known).
     reported_until: float = math.inf
 
 
@@ -1072,15 +1071,20 @@ class StreamingDetector:
         pieces it continues (:func:`_continues`), without its lone stray samples
         (:func:`_stray_samples`) and then without samples of another object before it
         (:meth:`_without_unreported_head`: a stray would bend the line the gap next to it
-        is judged by); once here for all the frames released together. A kept
-        piece serves only frames up to the newest stamp at which the live output reported
-        a position on it."""
+        is judged by); once here for all the frames released together. A track, kept
+        piece or current one (deviation 95), serves only frames up to the newest stamp at
+        which the live output reported a position on it."""
         p = self.params
         self._prune_archive()
         pieces = list(self._archive)
         if self._track and self._selected_conf >= p.min_confidence:
             track = sorted((*self._head, *self._track), key=lambda s: s.t)
-            pieces.append(_TrackPiece(*_sample_arrays(track), self._selected_conf))
+            current = _TrackPiece(*_sample_arrays(track), self._selected_conf)
+            # Like a kept piece, only up to where the live output reported it: a track just
+            # chosen that push() has not reported (yet) must not take the frames that the
+            # live output reported on the track before it (deviation 95).
+            until = self._reported_until(current)
+            pieces.append(dataclasses.replace(current, reported_until=until))
         chains: list[_TrackPiece] = []
         while pieces:
             chain = pieces.pop()

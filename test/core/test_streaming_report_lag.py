@@ -335,6 +335,26 @@ def test_delayed_tracks_join_the_pieces_they_continue_and_not_another_object():
     assert _detector_with([])._delayed_tracks() == []
 
 
+def test_a_track_the_live_output_has_not_reported_takes_no_frame_from_the_one_before():
+    # The drone's piece, reported live up to 2.9 s; then a re-clustering chose another
+    # object 30 m away, seen since 1.0 s, which push() has not reported.
+    drone_t, other_t = np.arange(0.0, 3.0, 0.1), np.arange(1.0, 4.0, 0.1)
+    drone = dataclasses.replace(_piece(drone_t, _line(drone_t), conf=0.7), reported_until=2.9)
+
+    def detector():
+        det = _detector_with([drone])
+        for t, xyz in zip(other_t, _line(other_t) + [30.0, 0.0, 0.0], strict=True):
+            det._track.append(streaming._TrackSample(float(t), xyz, np.zeros((3, 3), np.float32)))
+        det._selected_conf = 0.9
+        return det
+
+    assert _release_all(detector(), [1.5, 2.5]) == {1.5: 0.7, 2.5: 0.7}
+    # Once push() has reported it (at 3.5 s), it takes them.
+    det = detector()
+    det._live_reports.append((3.5, _line(np.array([3.5]))[0] + [30.0, 0.0, 0.0]))
+    assert _release_all(det, [1.5, 2.5]) == {1.5: 0.9, 2.5: 0.9}
+
+
 def test_a_kept_piece_is_reported_until_the_newest_live_estimate_on_it():
     det = _detector_with([])
     ts = np.arange(0.0, 2.0, 0.1)
