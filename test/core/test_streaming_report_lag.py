@@ -294,12 +294,13 @@ def test_a_stray_beside_a_gap_does_not_cut_the_drones_own_head():
     assert det._without_unreported_head(chain).ts[0] > 1.0
 
 
-def _detector_with(archive, track_t=None):
+def _detector_with(archive, track_t=None, offset=(0.0, 0.0, 0.0)):
     # No live run length rule: these detectors have no record of live estimates.
     det = StreamingDetector(detector_params({"report_lag": 5.0, "report_lag_min_run": 0.0}))
     det._archive.extend(archive)
     if track_t is not None:
-        for t, xyz in zip(track_t, _line(track_t), strict=True):
+        # The current track, on the line (``offset`` from it).
+        for t, xyz in zip(track_t, _line(track_t) + offset, strict=True):
             det._track.append(streaming._TrackSample(float(t), xyz, np.zeros((3, 3), np.float32)))
         det._selected_conf = 0.9
     return det
@@ -340,18 +341,11 @@ def test_a_track_the_live_output_has_not_reported_takes_no_frame_from_the_one_be
     # object 30 m away, seen since 1.0 s, which push() has not reported.
     drone_t, other_t = np.arange(0.0, 3.0, 0.1), np.arange(1.0, 4.0, 0.1)
     drone = dataclasses.replace(_piece(drone_t, _line(drone_t), conf=0.7), reported_until=2.9)
-
-    def detector():
-        det = _detector_with([drone])
-        for t, xyz in zip(other_t, _line(other_t) + [30.0, 0.0, 0.0], strict=True):
-            det._track.append(streaming._TrackSample(float(t), xyz, np.zeros((3, 3), np.float32)))
-        det._selected_conf = 0.9
-        return det
-
-    assert _release_all(detector(), [1.5, 2.5]) == {1.5: 0.7, 2.5: 0.7}
+    other = (30.0, 0.0, 0.0)
+    assert _release_all(_detector_with([drone], other_t, other), [1.5, 2.5]) == {1.5: 0.7, 2.5: 0.7}
     # Once push() has reported it (at 3.5 s), it takes them.
-    det = detector()
-    det._live_reports.append((3.5, _line(np.array([3.5]))[0] + [30.0, 0.0, 0.0]))
+    det = _detector_with([drone], other_t, other)
+    det._live_reports.append((3.5, _line(np.array([3.5]))[0] + other))
     assert _release_all(det, [1.5, 2.5]) == {1.5: 0.9, 2.5: 0.9}
 
 
