@@ -390,6 +390,28 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100000,
     ),
     ParamSpec(
+        "stream_hover_min_frames",
+        "int",
+        10,
+        "Streaming: frames (and returns) a new hovering candidate needs instead of "
+        "hover_min_frames (and stream_min_cluster_points) when its returns stay within "
+        "stream_hover_max_extent: a small drone hovering 25-30 m away gives a return or "
+        "two a second; values >= hover_min_frames switch this off.",
+        minimum=1,
+        maximum=100000,
+    ),
+    ParamSpec(
+        "stream_hover_max_extent",
+        "float",
+        0.6,
+        "Streaming: largest extent (m, 10th to 90th percentile on each axis) of a hovering "
+        "candidate confirmed with stream_hover_min_frames: a small drone's body and its "
+        "wind drift (0.1-0.4 m in the simulator), not the thin poles, far tree tops and "
+        "roof edges the persistence map has not learnt yet (0.8-2.3 m along them).",
+        minimum=0.0,
+        maximum=50.0,
+    ),
+    ParamSpec(
         "hover_max_contact",
         "float",
         0.5,

@@ -254,6 +254,7 @@ def score_clusters(
     min_track_seconds: float | None = None,
     structure_keys: np.ndarray | None = None,
     coherence_origin: float | None = None,
+    tight_hover: tuple[int, float] | None = None,
 ) -> ClusterScores:
     """Features, gates and scores of clusters ``0..n_clusters-1``.
 
@@ -271,6 +272,11 @@ def score_clusters(
     ``min_track_seconds`` (default ``params.min_track_seconds``, the offline value)
     scales the confidence of clusters seen for less than that many seconds; streaming
     passes ``params.stream_min_track_seconds``.
+
+    ``tight_hover`` = (frames, extent): a hovering cluster whose returns stay within
+    ``extent`` (10th-90th percentile per axis) needs only ``frames`` frames in place, and
+    as many points, to be a candidate with full support (streaming passes
+    ``stream_hover_min_frames`` and ``stream_hover_max_extent``); None: off.
 
     ``labels``/``xyz``/``t`` are the points the local windows are drawn from (label -1
     ignored). ``global_points``/``global_voxels`` give each cluster's global point count
@@ -356,6 +362,8 @@ def score_clusters(
             moving = np.maximum(moving, np.clip(res.extent / float(params.min_travel), 0.0, 1.0))
         motion = coherent * moving
         hovering = np.zeros(k, dtype=bool)
+        tight = np.zeros(k, dtype=bool)
+        tight_frames, tight_extent = tight_hover if tight_hover is not None else (0, 0.0)
         if params.hover_detection:
             # A compact object seen in many frames over some seconds: a hovering drone
             # (static structure has been suppressed, except compact isolated groups; see
@@ -372,16 +380,26 @@ def score_clusters(
             frames_in_place, span_in_place = frames_near(
                 frames, tt, median_position, 0.5 * float(params.hover_max_extent), k
             )
-            hovering = (
-                (core_extent <= params.hover_max_extent)
-                & (frames_in_place >= params.hover_min_frames)
-                & (span_in_place >= float(params.hover_min_seconds))
+            in_place = (core_extent <= params.hover_max_extent) & (
+                span_in_place >= float(params.hover_min_seconds)
             )
+            hovering = in_place & (frames_in_place >= params.hover_min_frames)
+            if tight_frames and tight_frames < params.hover_min_frames:
+                # A small drone hovering far away fills fewer frames in the same time;
+                # what stays that tight is a drone's body, not a pole or an edge.
+                tight = (
+                    in_place
+                    & ~hovering
+                    & (core_extent <= tight_extent)
+                    & (frames_in_place >= tight_frames)
+                )
+                hovering |= tight
             if structure_keys is not None and structure_keys.size and hovering.any():
                 contact = structure_contact(
                     lab, pts, k, hovering, structure_keys, float(params.static_voxel)
                 )
                 hovering &= contact <= float(params.hover_max_contact)
+                tight &= hovering
         res.normalized_score = motion * (res.mean_relative_density + lam * iou_term) / (1.0 + lam)
         if params.hover_detection:
             # Staying in place is what lowers R and raises IoU, so a hovering candidate
@@ -392,6 +410,8 @@ def score_clusters(
         # crowns and incoherent clutter among them hold most of the points. The rest keep
         # residual and acceleration 0.
         res.candidate = _gates(res, counts, params)
+        if tight.any():
+            res.candidate |= tight & _gates(res, counts, params, min_points=tight_frames)
         gated = (res.candidate & (res.normalized_score > 0))[lab]
         if hovering.any():
             # A hovering candidate is judged on the returns of what stays: one farther than
@@ -436,7 +456,9 @@ def score_clusters(
         a_lo = float(params.smooth_accel)
         a_hi = max(float(params.max_accel), a_lo + 1e-6)
         res.normalized_score *= np.clip((a_hi - res.acceleration) / (a_hi - a_lo), 0.0, 1.0)
-        support = np.minimum(1.0, res.support_frames / float(params.min_support_frames))
+        need = np.full(k, float(params.min_support_frames))
+        need[tight] = min(tight_frames, params.min_support_frames)
+        support = np.minimum(1.0, res.support_frames / need)
         confirm = float(
             params.min_track_seconds if min_track_seconds is None else min_track_seconds
         )
@@ -450,11 +472,15 @@ def score_clusters(
     return res
 
 
-def _gates(res: ClusterScores, counts: np.ndarray, params: ParamSet) -> np.ndarray:
+def _gates(
+    res: ClusterScores, counts: np.ndarray, params: ParamSet, min_points: int | None = None
+) -> np.ndarray:
     """(K,) bool: the candidate gates (size, height, volume, extent; local extent in
-    normalized scoring), from the features computed before any scoring."""
+    normalized scoring), from the features computed before any scoring; ``min_points``
+    in place of ``params.min_cluster_points``."""
+    least = params.min_cluster_points if min_points is None else min_points
     ok = (
-        (res.n_points >= params.min_cluster_points)
+        (res.n_points >= least)
         & (res.n_points <= params.max_cluster_points)
         & (res.centroid[:, 2] >= params.min_centroid_z)
         & (res.volume >= params.min_volume - 1e-9)

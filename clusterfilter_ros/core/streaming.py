@@ -1201,6 +1201,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         coherence_origin=first,
         min_track_seconds=p.stream_min_track_seconds,
         structure_keys=structure,
+        tight_hover=(p.stream_hover_min_frames, p.stream_hover_max_extent),
     )
     scores = scorer(labels, xyz, t, ps, n_clusters=k)
     if p.split_merged:

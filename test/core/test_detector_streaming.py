@@ -497,7 +497,9 @@ def _hover_frames(
 def test_a_reported_hovering_drone_needs_only_hover_keep_frames_to_stay_reported():
     frames = _hover_frames()
     new, kept_by = 20, 15  # frames a new / a reported hovering track needs
-    params = detector_params({"hover_min_frames": new, "hover_keep_frames": kept_by})
+    # The tight rule (stream_hover_min_frames) off: this drone's returns stay within 0.2 m.
+    values = {"hover_min_frames": new, "hover_keep_frames": kept_by, "stream_hover_min_frames": new}
+    params = detector_params(values)
     kept = [e.stamp - 1000.0 for e in run_streaming(frames, params)]
     off = [e.stamp - 1000.0 for e in run_streaming(frames, params.copy(hover_keep_frames=new))]
     assert min(kept) == min(off) < 15.0  # found once it has hover_min_frames (20)
@@ -510,12 +512,40 @@ def test_a_reported_hovering_drone_needs_only_hover_keep_frames_to_stay_reported
 def test_a_bird_passing_a_reported_hovering_drone_does_not_end_its_track():
     # The bird's returns join the drone's cluster and stay in the history for 10 s: the
     # cluster as a whole fails on its residual. The track's own returns still pass.
-    params = detector_params({"hover_min_frames": 20, "hover_keep_frames": 15})
+    values = {"hover_min_frames": 20, "hover_keep_frames": 15, "stream_hover_min_frames": 20}
+    params = detector_params(values)
     clean = [e.stamp - 1000.0 for e in run_streaming(_hover_frames(), params)]
     passed = [e.stamp - 1000.0 for e in run_streaming(_hover_frames(strays_at=17.0), params)]
     assert min(passed) == min(clean) < 15.0
     assert sum(s > 18.0 for s in passed) >= sum(s > 18.0 for s in clean) - 5
     assert max(passed) > 29.0
+
+
+def _sparse_stay_frames(spread: tuple[float, float, float], duration: float = 12.0) -> list[Frame]:
+    """Mid360 frames of a wall and one return every 0.5 s at (12, 6, 15), scattered
+    uniformly over ``spread`` (m) on each axis: a small drone hovering far away."""
+    rng = np.random.default_rng(3)
+    frames = []
+    for i in range(int(duration * 10)):
+        parts = [_wall(rng)]
+        if i % 5 == 0:
+            parts.append([12.0, 6.0, 15.0] + rng.uniform(-0.5, 0.5, (1, 3)) * spread)
+        frames.append(Frame(1000.0 + i * 0.1, MID360, np.vstack(parts).astype(np.float32)))
+    return frames
+
+
+def test_a_tight_sparse_hover_is_reported_after_stream_hover_min_frames():
+    # Two returns a second: hover_min_frames (15) takes 7.5 s, stream_hover_min_frames
+    # (10) 5 s, if the returns stay within stream_hover_max_extent.
+    params = detector_params()
+    drone = _sparse_stay_frames((0.3, 0.3, 0.2))
+    fast = [e.stamp - 1000.0 for e in run_streaming(drone, params)]
+    off = params.copy(stream_hover_min_frames=params.hover_min_frames)
+    slow = [e.stamp - 1000.0 for e in run_streaming(drone, off)]
+    assert fast and slow
+    assert 4.5 <= min(fast) < 6.0 <= 7.0 <= min(slow)
+    for e in run_streaming(drone, params):
+        assert np.linalg.norm(e.position - [12.0, 6.0, 15.0]) < 0.5
 
 
 def test_a_slow_track_takes_a_return_after_a_long_gap_within_reacquire_window():
