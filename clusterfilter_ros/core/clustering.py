@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.grouping import group_bounds
@@ -167,3 +168,34 @@ def merge_colocated_compact(
     out = labels.copy()
     out[keep] = target[lab]
     return relabel_compact(out)
+
+
+def absorb_colocated_noise(
+    labels: np.ndarray, xyz: np.ndarray, max_extent: float, radius: float
+) -> np.ndarray:
+    """Labels with each noise point within ``radius`` of a point of a compact cluster
+    (bounding box <= ``max_extent``) given that cluster's label (the nearest point's).
+
+    Space-time clustering leaves a hovering drone seen once a second partly as noise:
+    a return with no neighbour within a time bin is not core; at the same spot as the
+    drone's cluster it is the drone's too. Moving objects and extended structure are
+    not compact, so their clusters take nothing."""
+    labels = np.asarray(labels, dtype=np.int64)
+    noise = np.flatnonzero(labels < 0)
+    k = int(labels.max()) + 1 if labels.size else 0
+    if noise.size == 0 or k == 0:
+        return labels
+    pts = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    member = np.flatnonzero(labels >= 0)
+    ((lo, hi),) = group_bounds(labels[member], k, pts[member])
+    compact = (hi - lo).max(axis=1) <= max_extent
+    inside = member[compact[labels[member]]]
+    if inside.size == 0:
+        return labels
+    dist, nearest = cKDTree(pts[inside]).query(pts[noise], distance_upper_bound=radius)
+    hit = np.isfinite(dist)
+    if not hit.any():
+        return labels
+    out = labels.copy()
+    out[noise[hit]] = labels[inside[nearest[hit]]]
+    return out

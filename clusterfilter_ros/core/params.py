@@ -407,7 +407,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "Streaming: largest extent (m, 10th to 90th percentile on each axis) of a hovering "
         "candidate confirmed with stream_hover_min_frames: a small drone's body and its "
         "wind drift (0.1-0.4 m in the simulator), not the thin poles, far tree tops and "
-        "roof edges the persistence map has not learnt yet (0.8-2.3 m along them).",
+        "roof edges the persistence map has not learnt yet (0.8-2.3 m along them). "
+        "While stream_hover_min_frames is on, a return the clustering left as noise "
+        "within half of this of a cluster no wider than this joins it (a drone hovering "
+        "far away is seen in lone returns).",
         minimum=0.0,
         maximum=50.0,
     ),

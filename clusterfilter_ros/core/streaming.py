@@ -56,6 +56,7 @@ import numpy as np
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid
+from clusterfilter_ros.core.clustering import absorb_colocated_noise
 from clusterfilter_ros.core.estimate import Estimate, reported_positions
 from clusterfilter_ros.core.frame import Frame
 from clusterfilter_ros.core.linking import extend_track
@@ -1189,6 +1190,10 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
     linking = p.copy(link_max_dv=p.stream_link_max_dv)
     labels, k = global_clusters(xyz, t, linking, passes=p.stream_link_passes)
+    if k and p.hover_detection and p.stream_hover_min_frames < p.hover_min_frames:
+        # A tight hover's lone returns, left as noise, count towards its frames.
+        extent = float(p.stream_hover_max_extent)
+        labels = absorb_colocated_noise(labels, xyz, extent, extent / 2)
     if not k:
         return choice(None, 0.0, False, k, coast=True)
     # Windows aligned to the stream's first stamp (deterministic), unless the stream's

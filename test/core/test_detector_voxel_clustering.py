@@ -8,6 +8,7 @@ from sklearn.metrics import adjusted_rand_score
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.clustering import (
+    absorb_colocated_noise,
     dbscan_points,
     density_mask,
     relabel_compact,
@@ -132,6 +133,26 @@ def _unique_cases():
         ("wide ints", rng.integers(0, 1 << 40, 2000), None, False),
         ("one", np.array([7]), None, True),
     ]
+
+
+def test_noise_joins_a_compact_cluster_at_its_spot_only():
+    # Cluster 0: a hovering drone's burst of returns within 0.3 m; cluster 1: a bird's
+    # leg 8 m long. Noise: two lone returns of the drone 0.1 m from its cluster, one
+    # 0.5 m away, one on the bird's path, and an empty label set.
+    rng = np.random.default_rng(1)
+    drone = np.array([20.0, 5.0, 10.0]) + rng.uniform(-0.15, 0.15, (6, 3))
+    bird = np.column_stack([np.linspace(0, 8, 10), np.full(10, 30.0), np.full(10, 12.0)])
+    lone = np.array([[20.1, 5.0, 10.0], [20.0, 5.1, 9.95], [20.0, 5.0, 10.65], [4.0, 30.0, 12.1]])
+    xyz = np.vstack([drone, bird, lone])
+    labels = np.r_[np.zeros(6, int), np.ones(10, int), np.full(4, -1)]
+    out = absorb_colocated_noise(labels, xyz, max_extent=0.6, radius=0.3)
+    assert out[:16].tolist() == labels[:16].tolist()  # members keep their labels
+    assert out[16:].tolist() == [0, 0, -1, -1]
+    assert absorb_colocated_noise(labels[:16], xyz[:16], 0.6, 0.3).tolist() == labels[:16].tolist()
+    nothing = np.full(3, -1)
+    assert absorb_colocated_noise(nothing, xyz[:3], 0.6, 0.3).tolist() == [-1, -1, -1]
+    empty = absorb_colocated_noise(np.empty(0, int), np.empty((0, 3)), 0.6, 0.3)
+    assert empty.size == 0
 
 
 @pytest.mark.parametrize("case", _unique_cases(), ids=lambda c: c[0])
