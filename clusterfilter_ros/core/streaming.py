@@ -695,8 +695,8 @@ class StreamingDetector:
         later re-clustering)."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
-        first = min((s.t for s in (*self._head, *self._track)), default=math.inf)
-        first = first if current else math.inf
+        samples = (*self._head, *self._track) if current else ()
+        first = min((s.t for s in samples), default=math.inf)
         kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
         piece = _TrackPiece(*_sample_arrays(kept), confidence) if kept else None
         if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
@@ -1190,10 +1190,13 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
     linking = p.copy(link_max_dv=p.stream_link_max_dv)
     labels, k = global_clusters(xyz, t, linking, passes=p.stream_link_passes)
-    if k and p.hover_detection and p.stream_hover_min_frames < p.hover_min_frames:
-        # A tight hover's lone returns, left as noise, count towards its frames.
-        extent = float(p.stream_hover_max_extent)
-        labels = absorb_colocated_noise(labels, xyz, extent, extent / 2)
+    tight_hover = None  # deviation 96, on while it asks fewer frames than hover_min_frames
+    if p.hover_detection and p.stream_hover_min_frames < p.hover_min_frames:
+        tight_hover = (p.stream_hover_min_frames, p.stream_hover_max_extent)
+        if k:
+            # A tight hover's lone returns, left as noise, count towards its frames.
+            extent = float(p.stream_hover_max_extent)
+            labels = absorb_colocated_noise(labels, xyz, extent, extent / 2)
     if not k:
         return choice(None, 0.0, False, k, coast=True)
     # Windows aligned to the stream's first stamp (deterministic), unless the stream's
@@ -1206,7 +1209,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         coherence_origin=first,
         min_track_seconds=p.stream_min_track_seconds,
         structure_keys=structure,
-        tight_hover=(p.stream_hover_min_frames, p.stream_hover_max_extent),
+        tight_hover=tight_hover,
     )
     scores = scorer(labels, xyz, t, ps, n_clusters=k)
     if p.split_merged:
