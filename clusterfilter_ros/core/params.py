@@ -1137,6 +1137,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=60.0,
     ),
     ParamSpec(
+        "report_backfill_min_points",
+        "int",
+        100,
+        "report_backfill: the frames before a confirmation are also reported late when the "
+        "live run ended sooner than report_backfill_min_run, if the track they are "
+        "estimated from holds at least this many returns: a drone confirmed in the last "
+        "second of a close pass was seen in hundreds of returns, the short bird legs the "
+        "live output reported for a moment in tens; 0 = off.",
+        minimum=0,
+        maximum=1_000_000,
+    ),
+    ParamSpec(
         "report_head_gap",
         "float",
         0.5,

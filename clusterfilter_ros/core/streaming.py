@@ -994,7 +994,9 @@ class StreamingDetector:
         """Emit the held frames in order while the first backfilled one among them is
         decided: estimated once its live run (:meth:`_live_run`) has lasted
         ``report_backfill_min_run``, dropped if the run ended sooner or the frame is more
-        than ``report_backfill`` past due (``until`` inf: every frame is decided)."""
+        than ``report_backfill`` past due (``until`` inf: every frame is decided). A run
+        that ended sooner still has its frames estimated, within that wait, from a track
+        holding ``report_backfill_min_points`` returns (deviation 98)."""
         p = self.params
         held = self._held
         tracks: list[_TrackPiece] | None = None
@@ -1007,19 +1009,27 @@ class StreamingDetector:
                 waited = stamp <= until - p.report_backfill or len(held) > _MAX_LAGGED
                 if not lasted and going and not waited:
                     return
-                if lasted:
+                # Deviation 98: a run cut short still backfills from a well-observed track.
+                short = run is not None and not going and not waited
+                if lasted or (short and p.report_backfill_min_points > 0):
                     if tracks is None:
                         tracks = self._delayed_tracks()
-                    estimate = self._tracks_estimate(stamp, tracks)
+                    least = 0 if lasted else p.report_backfill_min_points
+                    estimate = self._tracks_estimate(stamp, tracks, least)
             held.popleft()
             if estimate is not None:
                 self._emit(estimate)
 
-    def _tracks_estimate(self, stamp: float, tracks: list[_TrackPiece]) -> Estimate | None:
+    def _tracks_estimate(
+        self, stamp: float, tracks: list[_TrackPiece], min_returns: int = 0
+    ) -> Estimate | None:
         """The delayed estimate at ``stamp`` from the first of ``tracks`` (of
-        :meth:`_delayed_tracks`) that reaches it and supports one."""
+        :meth:`_delayed_tracks`) that reaches it and supports one; only from a track
+        holding at least ``min_returns`` returns."""
         for track in tracks:
             if stamp > track.reported_until:
+                continue
+            if min_returns and track.ws.sum() < min_returns:
                 continue
             estimate = self._delayed_estimate(stamp, track)
             if estimate is not None:

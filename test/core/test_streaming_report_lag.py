@@ -712,11 +712,17 @@ def test_a_track_reported_live_for_a_moment_is_not_backfilled(scene):
     # The drone's returns stop 1 s after its confirmation: the live run lasts about 1.5
     # s, less than report_backfill_min_run (2 s), so the frames before the confirmation
     # beyond report_lag stay unreported; with the minimum at 0 they are reported.
+    # (report_backfill_min_points off: the test below is about it.)
     frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
     first_live = min(e.stamp for e in run_streaming(frames))
     cut = first_live + 1.0
     frames = _drone_gone_after(frames, cut)
-    values = {"report_lag": LAG, "report_backfill": 5.0, "report_backfill_min_run": 2.0}
+    values = {
+        "report_lag": LAG,
+        "report_backfill": 5.0,
+        "report_backfill_min_run": 2.0,
+        "report_backfill_min_points": 0,
+    }
     live = run_streaming(frames)
     assert min(e.stamp for e in live) == first_live
     assert max(e.stamp for e in live) - first_live < 2.0
@@ -724,6 +730,29 @@ def test_a_track_reported_live_for_a_moment_is_not_backfilled(scene):
     assert late and min(e.stamp for e in late) >= first_live - LAG - 0.15
     short = run_streaming(frames, detector_params({**values, "report_backfill_min_run": 0.0}))
     assert min(e.stamp for e in short) < first_live - LAG - 0.5
+
+
+def test_a_short_live_run_is_backfilled_from_a_track_with_many_returns(scene, drone_path_fn):
+    # The same short live run (about 1.5 s), but the confirmed track holds six returns a
+    # frame pair for seconds (deviation 98: a drone confirmed in the last second of a
+    # close pass): with report_backfill_min_points at or below what the track holds, its
+    # frames before the confirmation are reported late after all, from the track's
+    # returns; above it they are not.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    first_live = min(e.stamp for e in run_streaming(frames))
+    frames = _drone_gone_after(frames, first_live + 1.0)
+    values = {"report_lag": LAG, "report_backfill": 5.0, "report_backfill_min_run": 2.0}
+    kept = run_streaming(frames, detector_params({**values, "report_backfill_min_points": 100}))
+    assert min(e.stamp for e in kept) < first_live - LAG - 0.5
+    stamps = np.array([e.stamp for e in kept])
+    assert np.all(np.diff(stamps) > 0)
+    pos = np.array([e.position for e in kept])
+    err = np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.3
+    # At most 6 returns a frame pair over the stream's 10 s: fewer than 1000.
+    strict = {**values, "report_backfill_min_points": 1000}
+    dropped = run_streaming(frames, detector_params(strict))
+    assert dropped and min(e.stamp for e in dropped) >= first_live - LAG - 0.15
 
 
 def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
