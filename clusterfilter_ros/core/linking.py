@@ -444,6 +444,7 @@ def extend_track(
     params: ParamSet,
     short_gap: np.ndarray | None = None,
     grow_end: bool = True,
+    grow_start: bool = True,
 ) -> np.ndarray:
     """Grow a selected track at both ends with points of ``pool`` where it was heading.
 
@@ -466,7 +467,8 @@ def extend_track(
     farther out (:func:`_near_line`) at a spot that returned nothing else a second
     before or after (:func:`_seen_again`).
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
-    the end. ``grow_end`` False: grow the start only. Returns the new member mask.
+    the end. ``grow_end`` False: grow the start only; ``grow_start`` False: the end
+    only. Returns the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
@@ -485,7 +487,7 @@ def extend_track(
     hover_gap = float(params.extend_hover_gap)
     far_gap = float(params.extend_far_gap)
     viewpoint = np.asarray(params.viewpoint, dtype=np.float64)
-    for forward in (True, False) if grow_end else (False,):
+    for forward in [f for f, grow in ((True, grow_end), (False, grow_start)) if grow]:
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
         while True:

@@ -1170,6 +1170,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "a return or two a second. The live output does not use them; false = off.",
     ),
     ParamSpec(
+        "report_extend_tail",
+        "bool",
+        True,
+        "report_lag: the late output also reports the reported track's later returns that "
+        "the clustering left as noise or in clusters too small to score, found by growing "
+        "the track forward in time as offline does (across gaps up to extend_max_gap, or "
+        "extend_hover_gap for a hovering end; not extend_far_gap), for the frames after "
+        "the track's cluster ends, once the live output has reported the track up to "
+        "within max_gap of that end and over at least report_lag_min_run: a pass leaving "
+        "the lidars gives a return or two a second. The live output does not use them; "
+        "false = off.",
+    ),
+    ParamSpec(
         "report_lag_min_run",
         "float",
         0.5,

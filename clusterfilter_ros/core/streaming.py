@@ -136,6 +136,11 @@ class _TrackPiece:
     confidence: float
     # Newest stamp at which push() reported a position on this track (inf: not known).
     reported_until: float = math.inf
+    # report_extend_tail: newest stamp the track's grown tail serves, whether or not
+    # push() reported there (-inf: none).
+    extends_until: float = -math.inf
+    # report_extend_tail: newest sample of the track before its tail (inf: no tail).
+    tail_from: float = math.inf
 
 
 #: A slow track's fitted speed within this many standard errors of zero is taken for
@@ -260,6 +265,12 @@ def _recent_samples(
     return recent
 
 
+def _after(samples: Iterable[_TrackSample], track: Iterable[_TrackSample]) -> list[_TrackSample]:
+    """The ``samples`` newer than every sample of ``track`` (all of them if it is empty)."""
+    newest = max((s.t for s in track), default=-math.inf)
+    return [s for s in samples if s.t > newest]
+
+
 def _sample_arrays(samples: list[_TrackSample]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(times, positions, point counts) of samples sorted by time."""
     return (
@@ -307,6 +318,9 @@ class _TrackChoice:
     # report_extend_head: samples before the track's first one, of returns the track
     # grew back into (the late output's only).
     head: tuple[_TrackSample, ...] = ()
+    # report_extend_tail: samples after the track's newest one, of returns the track grew
+    # forward into (the late output's only).
+    tail: tuple[_TrackSample, ...] = ()
 
 
 class StreamingDetector:
@@ -352,6 +366,8 @@ class StreamingDetector:
         self._track: deque[_TrackSample] = deque()
         # report_extend_head: the track's earlier samples the late output also reads.
         self._head: tuple[_TrackSample, ...] = ()
+        # report_extend_tail: its later samples the late output also reads.
+        self._tail: tuple[_TrackSample, ...] = ()
         self._fit_cache: _TrackFit | None = None
         self._selected_conf = 0.0
         self._chosen_at = -math.inf  # stream time of the last re-clustering choosing a track
@@ -626,12 +642,14 @@ class StreamingDetector:
             self._drop_static_from_history()
         old_track = list(self._track)
         old_head = self._head
+        old_tail = self._tail
         old_conf = self._selected_conf
         old_velocity = None  # only needed when nothing was chosen (deviation 77)
         if choice.samples is None and old_track and old_conf >= self.params.min_confidence:
             old_velocity = self._track_state()[2]
         self._track.clear()
         self._head = ()
+        self._tail = ()
         self._selected_conf = 0.0
         self._clusters = choice.clusters
         self._foreground_points = choice.foreground_points
@@ -640,6 +658,7 @@ class StreamingDetector:
             self._selected_conf = choice.confidence
             self._track.extend(choice.samples)
             self._head = choice.head
+            self._tail = choice.tail
             if choice.confidence >= p.min_confidence:
                 self._chosen_at = choice.snapshot.now
             if choice.new_track:
@@ -653,9 +672,11 @@ class StreamingDetector:
             self._selected_conf = p.min_confidence
             self._track.extend(old_track)
             self._head = old_head
+            self._tail = old_tail
             self._catch_up()
         if self.params.report_lag > 0 and old_track and old_conf >= self.params.min_confidence:
-            self._archive_piece([*old_head, *old_track], old_conf, choice.snapshot.now)
+            old = [*old_head, *old_track, *_after(old_tail, old_track)]
+            self._archive_piece(old, old_conf, choice.snapshot.now)
         ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
@@ -958,13 +979,31 @@ class StreamingDetector:
         estimated once the live run holding the first live estimate after it has lasted
         ``report_backfill_min_run``, and not at all if the run ends sooner or the wait
         exceeds ``report_backfill`` (:meth:`_resolve_held`); the estimates made meanwhile
-        are held back so that the output stays in stamp order."""
+        are held back so that the output stays in stamp order.
+
+        With ``report_extend_tail`` a frame past the current track's cluster that its
+        grown tail serves (:attr:`_TrackPiece.extends_until`) is estimated when due,
+        whether or not push() reported anything since (deviation 99)."""
         p = self.params
         lagged = self._lagged
         wait_until = until - p.report_backfill
         tracks: list[_TrackPiece] | None = None  # built once for all frames released here
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             stamp = lagged[0]
+            on_tail = False  # past a track's cluster, on its grown tail (deviation 99)
+            if self._tail and p.report_extend_tail:
+                if tracks is None:
+                    tracks = self._delayed_tracks()
+                on_tail = any(tr.tail_from < stamp <= tr.extends_until for tr in tracks)
+            if on_tail:
+                lagged.popleft()
+                estimate = self._tracks_estimate(stamp, tracks)
+                if estimate is not None:
+                    if self._held:
+                        self._held.append((stamp, estimate))
+                    else:
+                        self._emit(estimate)
+                continue
             if self._last_live < stamp and stamp > wait_until and len(lagged) <= _MAX_LAGGED:
                 # Nothing reported live since this frame, nor since the later ones due:
                 # they wait for a confirmation.
@@ -1027,7 +1066,7 @@ class StreamingDetector:
         :meth:`_delayed_tracks`) that reaches it and supports one; only from a track
         holding at least ``min_returns`` returns."""
         for track in tracks:
-            if stamp > track.reported_until:
+            if stamp > max(track.reported_until, track.extends_until):
                 continue
             if min_returns and track.ws.sum() < min_returns:
                 continue
@@ -1089,13 +1128,26 @@ class StreamingDetector:
         self._prune_archive()
         pieces = list(self._archive)
         if self._track and self._selected_conf >= p.min_confidence:
-            track = sorted((*self._head, *self._track), key=lambda s: s.t)
-            current = _TrackPiece(*_sample_arrays(track), self._selected_conf)
+            core = sorted((*self._head, *self._track), key=lambda s: s.t)
+            tail = _after(self._tail, core)
+            current = _TrackPiece(*_sample_arrays([*core, *tail]), self._selected_conf)
             # Like a kept piece, only up to where the live output reported it: a track just
             # chosen that push() has not reported (yet) must not take the frames that the
             # live output reported on the track before it (deviation 95).
-            until = self._reported_until(current)
-            pieces.append(dataclasses.replace(current, reported_until=until))
+            reported = self._reported_stamps(current, newest_first=True)
+            until = next(reported, -math.inf)
+            # Past its cluster along its grown tail, once the live output reported it to
+            # within max_gap of the cluster's end, over at least report_lag_min_run
+            # (deviation 99).
+            extends = -math.inf
+            if tail and until >= core[-1].t - p.max_gap:
+                since = until - p.report_lag_min_run
+                if any(stamp <= since for stamp in reported):
+                    extends = tail[-1].t + p.max_extrapolation
+            current = dataclasses.replace(
+                current, reported_until=until, extends_until=extends, tail_from=core[-1].t
+            )
+            pieces.append(current)
         chains: list[_TrackPiece] = []
         while pieces:
             chain = pieces.pop()
@@ -1115,6 +1167,8 @@ class StreamingDetector:
                     np.concatenate([head.ws, chain.ws]),
                     chain.confidence,
                     max(chain.reported_until, piece.reported_until),
+                    chain.extends_until,
+                    chain.tail_from,
                 )
             chains.append(self._without_unreported_head(_without_strays(chain, p)))
         return chains
@@ -1188,11 +1242,15 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     ) -> _TrackChoice:
         samples = None if mask is None else _track_samples(mask, xyz, t, p)
         head: tuple[_TrackSample, ...] = ()
+        tail: tuple[_TrackSample, ...] = ()
         if samples and pool is not None:
-            head = _grown_head(mask, pool, xyz, t, samples[0].t, p)
+            if p.report_extend_head:
+                head = _grown_head(mask, pool, xyz, t, samples[0].t, p)
+            if p.report_extend_tail:
+                tail = _grown_tail(mask, pool, xyz, t, samples[-1].t, p)
         ms = (time.perf_counter() - start) * 1e3
         n = 0 if t is None else int(t.size)
-        return _TrackChoice(snap, static, samples, confidence, new, k, n, ms, coast, head)
+        return _TrackChoice(snap, static, samples, confidence, new, k, n, ms, coast, head, tail)
 
     if xyz is None or t is None or t.size == 0:
         return choice(None, 0.0, False, 0)
@@ -1236,7 +1294,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             excess_min_points=3 * ps.min_cluster_points,
             apart=p.split_apart,
         )
-    if p.report_lag > 0 and p.report_extend_head:
+    if p.report_lag > 0 and (p.report_extend_head or p.report_extend_tail):
         # Noise and clusters too small to be judged alone, as offline grows into.
         pool = (labels < 0) | (scores.n_points < ps.min_cluster_points)[np.maximum(labels, 0)]
     chosen = select_clusters(scores, ps)
@@ -1347,6 +1405,34 @@ def _grown_head(
     if not head.any():
         return ()
     return tuple(s for s in _track_samples(head, xyz[sub], t[sub], params) if s.t < before)
+
+
+def _grown_tail(
+    mask: np.ndarray,
+    pool: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    after: float,
+    params: ParamSet,
+) -> tuple[_TrackSample, ...]:
+    """report_extend_tail: the samples, after ``after`` (the track's newest sample), of the
+    points in ``pool`` the track of ``mask`` grows forward into (:func:`extend_track`, its
+    end only; as :func:`_grown_head`, not across offline's extend_far_gap toward a lone
+    far return, which put estimates 2-4 m off on fast passes)."""
+    last = float(t[mask].max())
+    span = max(params.link_fit_window, params.link_max_gap)
+    # Only what the growth reads: the pool after the track and the track's last seconds.
+    sub = np.flatnonzero((pool & (t > last)) | (mask & (t >= last - span)))
+    if not pool[sub].any():
+        return ()
+    member = mask[sub]
+    grown = extend_track(
+        member, xyz[sub], t[sub], pool[sub], params.copy(extend_far_gap=0.0), grow_start=False
+    )
+    tail = grown & ~member
+    if not tail.any():
+        return ()
+    return tuple(s for s in _track_samples(tail, xyz[sub], t[sub], params) if s.t > after)
 
 
 def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSet) -> bool:

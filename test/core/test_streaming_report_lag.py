@@ -774,3 +774,33 @@ def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
     got = [(e.stamp, e.position.tolist(), at) for e, at in zip(again, again_at, strict=True)]
     want = [(e.stamp, e.position.tolist(), at) for e, at in zip(fresh, fresh_at, strict=True)]
     assert got == want
+
+
+def test_the_late_output_follows_a_track_forward_into_its_sparse_returns(scene, drone_path_fn):
+    # After 6 s the drone gives one return every 1.2 s (the live tracker waits at most
+    # max_gap, 1 s, for the next; the growth bridges extend_max_gap, 1.5 s): the live
+    # output stops soon after 6 s, the late output reports the frames near those returns
+    # too, from the track grown forward (deviation 99), and only with report_extend_tail.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    sparse = {1007.2, 1008.4, 1009.6}
+    cut = []
+    for f in frames:
+        if f.stamp <= 1006.0:
+            cut.append(f)
+        elif f.sensor == MID360 and round(f.stamp, 1) in sparse:
+            cut.append(Frame(f.stamp, f.sensor, f.xyz[:-2]))  # one drone return left
+        else:
+            cut.append(Frame(f.stamp, f.sensor, f.xyz[:-3]))
+    values = {"report_lag": LAG, "report_backfill": 0.0}
+    live = run_streaming(cut, detector_params(values | {"report_lag": 0.0}))
+    assert max(e.stamp for e in live) < 1007.0
+    late = run_streaming(cut, detector_params(values))
+    off = run_streaming(cut, detector_params(values | {"report_extend_tail": False}))
+    assert max(e.stamp for e in off) < 1007.0
+    # Between and around the returns 1.2 s apart: frames within max_extrapolation (0.5 s)
+    # of one, or between two less than max_gap apart once a grown sample joins them.
+    after = [e for e in late if e.stamp > 1006.6]
+    stamps = np.array([e.stamp for e in after])
+    assert len(after) >= 30 and stamps.max() >= 1008.8
+    pos = np.array([e.position for e in after])
+    assert np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1).max() < 1.0
