@@ -1384,27 +1384,8 @@ def _grown_head(
     params: ParamSet,
 ) -> tuple[_TrackSample, ...]:
     """report_extend_head: the samples, before ``before`` (the track's first sample), of
-    the points in ``pool`` the track of ``mask`` grows back into (:func:`extend_track`,
-    its start only)."""
-    first = float(t[mask].min())
-    span = max(params.link_fit_window, params.link_max_gap)
-    # Only what the growth reads: the pool before the track and the track's first
-    # seconds, whose line the growth starts from.
-    sub = np.flatnonzero((pool & (t < first)) | (mask & (t <= first + span)))
-    if not pool[sub].any():
-        return ()
-    member = mask[sub]
-    # Not across the longer gaps offline takes toward a far lone return (extend_far_gap):
-    # on fast passes such a return was often something else's near the line, and the
-    # late output reported a second of it (fast_pass, 212 runs the growth changed: other
-    # objects 1.34% -> 0.27% of the time without it, detection 92.7% -> 92.2%).
-    grown = extend_track(
-        member, xyz[sub], t[sub], pool[sub], params.copy(extend_far_gap=0.0), grow_end=False
-    )
-    head = grown & ~member
-    if not head.any():
-        return ()
-    return tuple(s for s in _track_samples(head, xyz[sub], t[sub], params) if s.t < before)
+    the points in ``pool`` the track of ``mask`` grows back into (:func:`_grown`)."""
+    return _grown(mask, pool, xyz, t, before, params, forward=False)
 
 
 def _grown_tail(
@@ -1416,23 +1397,53 @@ def _grown_tail(
     params: ParamSet,
 ) -> tuple[_TrackSample, ...]:
     """report_extend_tail: the samples, after ``after`` (the track's newest sample), of the
-    points in ``pool`` the track of ``mask`` grows forward into (:func:`extend_track`, its
-    end only; as :func:`_grown_head`, not across offline's extend_far_gap toward a lone
-    far return, which put estimates 2-4 m off on fast passes)."""
-    last = float(t[mask].max())
+    points in ``pool`` the track of ``mask`` grows forward into (:func:`_grown`)."""
+    return _grown(mask, pool, xyz, t, after, params, forward=True)
+
+
+def _grown(
+    mask: np.ndarray,
+    pool: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    edge: float,
+    params: ParamSet,
+    forward: bool,
+) -> tuple[_TrackSample, ...]:
+    """The samples beyond ``edge`` (after it ``forward``, else before it) of the points in
+    ``pool`` the track of ``mask`` grows into at that end (:func:`extend_track`, one end
+    only)."""
     span = max(params.link_fit_window, params.link_max_gap)
-    # Only what the growth reads: the pool after the track and the track's last seconds.
-    sub = np.flatnonzero((pool & (t > last)) | (mask & (t >= last - span)))
+    # Only what the growth reads: the pool beyond the track's end and the track's
+    # seconds there, whose line the growth starts from.
+    if forward:
+        end = float(t[mask].max())
+        sub = np.flatnonzero((pool & (t > end)) | (mask & (t >= end - span)))
+    else:
+        end = float(t[mask].min())
+        sub = np.flatnonzero((pool & (t < end)) | (mask & (t <= end + span)))
     if not pool[sub].any():
         return ()
     member = mask[sub]
+    # Not across the longer gaps offline takes toward a far lone return (extend_far_gap):
+    # on fast passes such a return was often something else's near the line, and the
+    # late output reported a second of it (the head, fast_pass, 212 runs the growth
+    # changed: other objects 1.34% -> 0.27% of the time without it, detection 92.7% ->
+    # 92.2%; the tail, deviation 99: an estimate held at such a return 2-4 m off).
     grown = extend_track(
-        member, xyz[sub], t[sub], pool[sub], params.copy(extend_far_gap=0.0), grow_start=False
+        member,
+        xyz[sub],
+        t[sub],
+        pool[sub],
+        params.copy(extend_far_gap=0.0),
+        grow_end=forward,
+        grow_start=not forward,
     )
-    tail = grown & ~member
-    if not tail.any():
+    new = grown & ~member
+    if not new.any():
         return ()
-    return tuple(s for s in _track_samples(tail, xyz[sub], t[sub], params) if s.t > after)
+    samples = _track_samples(new, xyz[sub], t[sub], params)
+    return tuple(s for s in samples if (s.t > edge if forward else s.t < edge))
 
 
 def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSet) -> bool:
