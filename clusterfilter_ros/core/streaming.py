@@ -995,29 +995,22 @@ class StreamingDetector:
                 if tracks is None:
                     tracks = self._delayed_tracks()
                 on_tail = any(tr.tail_from < stamp <= tr.extends_until for tr in tracks)
-            if on_tail:
-                lagged.popleft()
-                estimate = self._tracks_estimate(stamp, tracks)
-                if estimate is not None:
-                    if self._held:
-                        self._held.append((stamp, estimate))
-                    else:
-                        self._emit(estimate)
-                continue
-            if self._last_live < stamp and stamp > wait_until and len(lagged) <= _MAX_LAGGED:
+            waiting = self._last_live < stamp and stamp > wait_until and len(lagged) <= _MAX_LAGGED
+            if waiting and not on_tail:
                 # Nothing reported live since this frame, nor since the later ones due:
                 # they wait for a confirmation.
                 self._unreported_until = max(self._unreported_until, until)
                 break
             lagged.popleft()
-            if self._last_live < stamp:
-                continue
-            if stamp <= self._unreported_until:
-                self._held.append((stamp, None))  # backfilled: resolved below
-                continue
-            shortest = p.report_lag_min_run
-            if shortest > 0 and self._live_run_seconds(stamp) < shortest:
-                continue
+            if not on_tail:  # a tail frame is estimated whatever the live output did
+                if self._last_live < stamp:
+                    continue
+                if stamp <= self._unreported_until:
+                    self._held.append((stamp, None))  # backfilled: resolved below
+                    continue
+                shortest = p.report_lag_min_run
+                if shortest > 0 and self._live_run_seconds(stamp) < shortest:
+                    continue
             if tracks is None:
                 tracks = self._delayed_tracks()
             estimate = self._tracks_estimate(stamp, tracks)
@@ -1161,14 +1154,12 @@ class StreamingDetector:
                 if not _continues(head, chain, p):
                     break
                 pieces.pop()
-                chain = _TrackPiece(
-                    np.concatenate([head.ts, chain.ts]),
-                    np.concatenate([head.ps, chain.ps]),
-                    np.concatenate([head.ws, chain.ws]),
-                    chain.confidence,
-                    max(chain.reported_until, piece.reported_until),
-                    chain.extends_until,
-                    chain.tail_from,
+                chain = dataclasses.replace(
+                    chain,
+                    ts=np.concatenate([head.ts, chain.ts]),
+                    ps=np.concatenate([head.ps, chain.ps]),
+                    ws=np.concatenate([head.ws, chain.ws]),
+                    reported_until=max(chain.reported_until, piece.reported_until),
                 )
             chains.append(self._without_unreported_head(_without_strays(chain, p)))
         return chains
