@@ -1183,6 +1183,26 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "false = off.",
     ),
     ParamSpec(
+        "report_fill",
+        "bool",
+        True,
+        "report_lag: the late output also reads the returns inside a gap of the reported "
+        "track longer than max_gap (where its samples support no estimate) that lie on "
+        "its path, noise or in clusters too small to score, found as offline fills a "
+        "track (linking reach over half the gap): a far pass's single returns between "
+        "the frames the clustering kept. The live output does not use them; false = off.",
+    ),
+    ParamSpec(
+        "report_bridge",
+        "bool",
+        True,
+        "report_lag: a frame between two live reports on the same track at most "
+        "link_max_gap apart is reported late although the live run after it was shorter "
+        "than report_lag_min_run, when the run before it was not (a pass the live "
+        "output let go in its sparse returns and took up again for a moment); false = "
+        "such a frame waits for the run after it as any other.",
+    ),
+    ParamSpec(
         "report_lag_min_run",
         "float",
         0.5,

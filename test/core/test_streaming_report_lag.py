@@ -804,3 +804,81 @@ def test_the_late_output_follows_a_track_forward_into_its_sparse_returns(scene, 
     assert len(after) >= 30 and stamps.max() >= 1008.8
     pos = np.array([e.position for e in after])
     assert np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1).max() < 1.0
+
+
+def _straight_pass(frames: list[Frame], returns) -> tuple[list[Frame], callable]:
+    """The scene's frames (built with ``drone=False``) with a drone passing in a straight
+    line at 10 m/s, 30 m up; ``returns(t, sensor)`` gives its number of returns in the
+    frame ``t`` s into the scene. Returns (frames, path function of t)."""
+
+    def path(t):
+        t = np.asarray(t, dtype=float)
+        return np.stack([-50.0 + 10.0 * t, np.full_like(t, 5.0), np.full_like(t, 30.0)], -1)
+
+    rng = np.random.default_rng(1)
+    out = []
+    for f in frames:
+        t = f.stamp - 1000.0
+        pts = path(t) + rng.normal(0, 0.1, (returns(round(t, 1), f.sensor), 3))
+        out.append(Frame(f.stamp, f.sensor, np.vstack([f.xyz, pts]).astype(np.float32)))
+    return out, path
+
+
+def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(scene):
+    # From 5.0 to 6.6 s the pass gives one return at 5.5 s and one at 6.1 s: the
+    # clustering leaves them as noise and links the two sides, whose 1.6 s gap (longer
+    # than max_gap) the late output's estimate would not cross; filled with them
+    # (report_fill, as offline fills a track) it does, and the live output is unchanged.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
+
+    def returns(t, sensor):
+        if 5.0 < t < 6.6:
+            return int(sensor == MID360 and t in (5.5, 6.1))
+        return 3
+
+    frames, path = _straight_pass(frames, returns)
+    values = {"report_lag": LAG, "report_backfill": 0.0}
+    runs = {}
+    for fill in (False, True):
+        det = StreamingDetector(detector_params(values | {"report_fill": fill}))
+        live, delayed, _ = _push_all(frames, det)
+        runs[fill] = ([(e.stamp, e.position.tolist()) for e in live], delayed + det.flush())
+    assert runs[False][0] == runs[True][0]
+    inside = {
+        fill: [e for e in late if 1005.6 <= e.stamp <= 1006.0] for fill, (_, late) in runs.items()
+    }
+    assert inside[False] == []
+    assert len(inside[True]) >= 8  # both lidars' frames
+    late = runs[True][1]
+    stamps = np.array([e.stamp for e in late])
+    err = np.linalg.norm(np.array([e.position for e in late]) - path(stamps - 1000), axis=1)
+    assert err.max() < 0.5
+
+
+def test_a_frame_between_two_live_runs_on_one_track_is_reported_late(scene):
+    # The pass's returns stop at 6.0 s and come back for 0.1 s at 7.7 s: the live output
+    # reports it to 6.5 s (max_extrapolation), lets go, and takes it up again at 8.0 s for
+    # 0.2 s. With report_lag_min_run 1 s that short run alone would keep the frames
+    # before it out of the late output; the run before them lasted, both runs are on one
+    # track 1.5 s apart (within link_max_gap), so they are reported (report_bridge)
+    # where the track's samples support an estimate: near its returns at 7.7 s.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
+    frames, path = _straight_pass(frames, lambda t, _: 3 if t <= 6.0 or 7.7 <= t <= 7.8 else 0)
+    values = {"report_lag": LAG, "report_backfill": 0.0, "report_lag_min_run": 1.0}
+    live = run_streaming(frames, detector_params(values | {"report_lag": 0.0}))
+    gap = [e for e in live if 1006.6 <= e.stamp < 1008.0]
+    assert gap == [] and any(e.stamp >= 1008.0 for e in live)
+    late = {
+        bridge: [
+            e
+            for e in run_streaming(frames, detector_params(values | {"report_bridge": bridge}))
+            if 1006.6 <= e.stamp < 1008.0
+        ]
+        for bridge in (False, True)
+    }
+    # Without it, only the frames that fell due while the short run could still go on.
+    assert late[False] and max(e.stamp for e in late[False]) < 1007.4
+    stamps = np.array([e.stamp for e in late[True]])
+    assert len(stamps) >= 10 and stamps.min() <= 1007.3 and stamps.max() >= 1007.9
+    err = np.linalg.norm(np.array([e.position for e in late[True]]) - path(stamps - 1000), axis=1)
+    assert err.max() < 0.5
