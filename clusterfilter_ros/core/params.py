@@ -1189,8 +1189,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "report_lag: the late output also reads the returns inside a gap of the reported "
         "track longer than max_gap (where its samples support no estimate) that lie on "
         "its path, noise or in clusters too small to score, found as offline fills a "
-        "track (linking reach over half the gap): a far pass's single returns between "
-        "the frames the clustering kept. The live output does not use them; false = off.",
+        "track (the linking reach over half the gap, at most track_gate from the chord): "
+        "a far pass's single returns between the frames the clustering kept. The live "
+        "output does not use them; false = off.",
     ),
     ParamSpec(
         "report_bridge",
