@@ -1015,6 +1015,7 @@ class StreamingDetector:
                 self._unreported_until = max(self._unreported_until, until)
                 break
             lagged.popleft()
+            estimator = self._tracks_estimate
             if not on_tail:  # a tail frame is estimated whatever the live output did
                 if self._last_live < stamp:
                     continue
@@ -1025,15 +1026,10 @@ class StreamingDetector:
                 if shortest > 0 and self._live_run_seconds(stamp) < shortest:
                     if not p.report_bridge:
                         continue
-                    if tracks is None:
-                        tracks = self._delayed_tracks()
-                    estimate = self._bridged_estimate(stamp, tracks)
-                    if estimate is not None:
-                        self._emit_in_order(estimate)
-                    continue
+                    estimator = self._bridged_estimate  # deviation 101
             if tracks is None:
                 tracks = self._delayed_tracks()
-            estimate = self._tracks_estimate(stamp, tracks)
+            estimate = estimator(stamp, tracks)
             if estimate is not None:
                 self._emit_in_order(estimate)
         self._resolve_held(until)
