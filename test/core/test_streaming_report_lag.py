@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
@@ -806,7 +807,9 @@ def test_the_late_output_follows_a_track_forward_into_its_sparse_returns(scene, 
     assert np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1).max() < 1.0
 
 
-def _straight_pass(frames: list[Frame], returns) -> tuple[list[Frame], callable]:
+def _straight_pass(
+    frames: list[Frame], returns: Callable[[float, str], int]
+) -> tuple[list[Frame], Callable[[np.ndarray], np.ndarray]]:
     """The scene's frames (built with ``drone=False``) with a drone passing in a straight
     line at 10 m/s, 30 m up; ``returns(t, sensor)`` gives its number of returns in the
     frame ``t`` s into the scene. Returns (frames, path function of t)."""
