@@ -1015,7 +1015,7 @@ class StreamingDetector:
                 self._unreported_until = max(self._unreported_until, until)
                 break
             lagged.popleft()
-            estimator = self._tracks_estimate
+            bridged = False  # deviation 101: only from a track reported on both sides
             if not on_tail:  # a tail frame is estimated whatever the live output did
                 if self._last_live < stamp:
                     continue
@@ -1026,10 +1026,10 @@ class StreamingDetector:
                 if shortest > 0 and self._live_run_seconds(stamp) < shortest:
                     if not p.report_bridge:
                         continue
-                    estimator = self._bridged_estimate  # deviation 101
+                    bridged = True
             if tracks is None:
                 tracks = self._delayed_tracks()
-            estimate = estimator(stamp, tracks)
+            estimate = self._tracks_estimate(stamp, tracks, bridged=bridged)
             if estimate is not None:
                 self._emit_in_order(estimate)
         self._resolve_held(until)
@@ -1065,41 +1065,40 @@ class StreamingDetector:
                 self._emit(estimate)
 
     def _tracks_estimate(
-        self, stamp: float, tracks: list[_TrackPiece], min_returns: int = 0
+        self,
+        stamp: float,
+        tracks: list[_TrackPiece],
+        min_returns: int = 0,
+        bridged: bool = False,
     ) -> Estimate | None:
         """The delayed estimate at ``stamp`` from the first of ``tracks`` (of
         :meth:`_delayed_tracks`) that reaches it and supports one; only from a track
-        holding at least ``min_returns`` returns."""
+        holding at least ``min_returns`` returns, and with ``bridged`` only from one the
+        live output reported on both sides of ``stamp`` (:meth:`_bridges`)."""
         for track in tracks:
             if stamp > max(track.reported_until, track.extends_until):
                 continue
             if min_returns and track.ws.sum() < min_returns:
+                continue
+            if bridged and not self._bridges(stamp, track):
                 continue
             estimate = self._delayed_estimate(stamp, track)
             if estimate is not None:
                 return estimate
         return None
 
-    def _bridged_estimate(self, stamp: float, tracks: list[_TrackPiece]) -> Estimate | None:
-        """report_bridge: the delayed estimate at ``stamp``, whose live run after it was
-        too short, from the first of ``tracks`` on which push() reported positions before
-        and after ``stamp`` (:meth:`_reported_stamps`) at most ``link_max_gap`` apart, the
-        earlier within a live run that lasted ``report_lag_min_run`` or is still going."""
+    def _bridges(self, stamp: float, track: _TrackPiece) -> bool:
+        """report_bridge: whether push() reported positions on ``track``
+        (:meth:`_reported_stamps`) before and after ``stamp`` at most ``link_max_gap``
+        apart, the earlier within a live run that lasted ``report_lag_min_run`` or is
+        still going (deviation 101)."""
         p = self.params
-        for track in tracks:
-            if stamp > max(track.reported_until, track.extends_until):
-                continue
-            hits = np.fromiter(self._reported_stamps(track, newest_first=False), float)
-            before, after = hits[hits < stamp], hits[hits > stamp]
-            if not before.size or not after.size or after[0] - before[-1] > p.link_max_gap:
-                continue
-            run = self._live_run(float(before[-1]))
-            if run is None or (not run[2] and run[1] - run[0] < p.report_lag_min_run):
-                continue
-            estimate = self._delayed_estimate(stamp, track)
-            if estimate is not None:
-                return estimate
-        return None
+        hits = np.fromiter(self._reported_stamps(track, newest_first=False), float)
+        before, after = hits[hits < stamp], hits[hits > stamp]
+        if not before.size or not after.size or after[0] - before[-1] > p.link_max_gap:
+            return False
+        run = self._live_run(float(before[-1]))
+        return run is not None and (run[2] or run[1] - run[0] >= p.report_lag_min_run)
 
     def _emit_in_order(self, estimate: Estimate) -> None:
         """Emit ``estimate``, or hold it behind the held frames before it."""
@@ -1277,15 +1276,26 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         inner: tuple[_TrackSample, ...] = ()
         if samples and pool is not None:
             if p.report_extend_head:
-                head = _grown_head(mask, pool, xyz, t, samples[0].t, p)
+                head = _grown(mask, pool, xyz, t, samples[0].t, p, forward=False)
             if p.report_extend_tail:
-                tail = _grown_tail(mask, pool, xyz, t, samples[-1].t, p)
+                tail = _grown(mask, pool, xyz, t, samples[-1].t, p, forward=True)
             if p.report_fill:
                 inner = _filled_gaps(mask, pool, xyz, t, p)
         ms = (time.perf_counter() - start) * 1e3
         n = 0 if t is None else int(t.size)
         return _TrackChoice(
-            snap, static, samples, confidence, new, k, n, ms, coast, head, tail, inner
+            snap,
+            static,
+            samples,
+            confidence,
+            new,
+            k,
+            n,
+            ms,
+            coast,
+            head=head,
+            tail=tail,
+            inner=inner,
         )
 
     if xyz is None or t is None or t.size == 0:
@@ -1411,32 +1421,6 @@ def _track_samples(
     return samples
 
 
-def _grown_head(
-    mask: np.ndarray,
-    pool: np.ndarray,
-    xyz: np.ndarray,
-    t: np.ndarray,
-    before: float,
-    params: ParamSet,
-) -> tuple[_TrackSample, ...]:
-    """report_extend_head: the samples, before ``before`` (the track's first sample), of
-    the points in ``pool`` the track of ``mask`` grows back into (:func:`_grown`)."""
-    return _grown(mask, pool, xyz, t, before, params, forward=False)
-
-
-def _grown_tail(
-    mask: np.ndarray,
-    pool: np.ndarray,
-    xyz: np.ndarray,
-    t: np.ndarray,
-    after: float,
-    params: ParamSet,
-) -> tuple[_TrackSample, ...]:
-    """report_extend_tail: the samples, after ``after`` (the track's newest sample), of the
-    points in ``pool`` the track of ``mask`` grows forward into (:func:`_grown`)."""
-    return _grown(mask, pool, xyz, t, after, params, forward=True)
-
-
 def _grown(
     mask: np.ndarray,
     pool: np.ndarray,
@@ -1446,7 +1430,8 @@ def _grown(
     params: ParamSet,
     forward: bool,
 ) -> tuple[_TrackSample, ...]:
-    """The samples beyond ``edge`` (after it ``forward``, else before it) of the points in
+    """report_extend_tail (``forward``) / report_extend_head: the samples beyond ``edge``
+    (the track's newest sample, after it; else its first, before it) of the points in
     ``pool`` the track of ``mask`` grows into at that end (:func:`extend_track`, one end
     only)."""
     span = max(params.link_fit_window, params.link_max_gap)
