@@ -1063,6 +1063,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=30.0,
     ),
     ParamSpec(
+        "track_recency",
+        "float",
+        0.5,
+        "Streaming: in the fit of the position push() reports, each sample of the last "
+        "track_window seconds weighs its point count times exp(-age / track_recency), "
+        "age in seconds before the newest sample, so a start, stop or turn shows sooner; "
+        "a moving track's quadratic then needs 4 samples over 0.4 s (else 6 over 0.6 s) "
+        "and a curvature of at least two standard errors. Which returns join the track "
+        "is decided on equal weights. 0 = equal weights.",
+        minimum=0.0,
+        maximum=30.0,
+    ),
+    ParamSpec(
         "track_gate",
         "float",
         2.0,

@@ -23,7 +23,8 @@ re-clusterings, new points within ``track_gate`` metres of the predicted positio
 the track, up to ``max_gap`` seconds after its newest sample. The estimate for a frame is
 a weighted straight-line fit (a quadratic for a well-sampled moving track, continued along
 its tangent past the newest sample) over the track's last ``track_window`` seconds (at
-least its last three samples) up to the end of the frame's scan, evaluated at the frame
+least its last three samples, newer ones weighing more with ``track_recency``) up to the
+end of the frame's scan, evaluated at the frame
 stamp, and reported while the newest sample is at most ``max_extrapolation`` old
 (``max_gap`` for a track slower than ``min_speed``).
 
@@ -110,13 +111,15 @@ class _TrackFit:
 
     samples: tuple[_TrackSample, ...]
     params: ParamSet  # the parameters they were made with
-    points: int  # returns in the samples
+    points: int  # returns in the samples (the support count, whatever the weights)
     slope: np.ndarray  # (3,) velocity of the straight line (zero over < 2 frame periods)
     mean: np.ndarray  # (3,) weighted mean position
     tc: float  # weighted mean time
     t_newest: float  # time of the newest sample
     # (3, 3) quadratic coefficients about tc, when the track moves at least min_speed,
-    # 6 samples span 0.6 s and the fitted acceleration is at most max_accel; else None.
+    # 6 samples span 0.6 s (with track_recency: 4 over 0.4 s, the curvature at least
+    # _CURVATURE_SIGMAS standard errors) and the fitted acceleration is at most
+    # max_accel; else None.
     quadratic: np.ndarray | None
     # The line's speed is below min_speed and within _STILL_SIGMAS standard errors of
     # zero: as far as its samples tell, the track is not moving (deviation 73).
@@ -143,6 +146,13 @@ class _TrackPiece:
     tail_from: float = math.inf
 
 
+#: With ``track_recency``, the samples and span a moving track's live quadratic needs
+#: (deviation 102; without it 6 samples over 0.6 s).
+_RECENT_QUAD_SAMPLES = 4
+_RECENT_QUAD_SPAN = 0.4
+#: ... and its quadratic term must be at least this many standard errors from zero.
+_CURVATURE_SIGMAS = 2.0
+
 #: A slow track's fitted speed within this many standard errors of zero is taken for
 #: the scatter of its returns (deviation 73).
 _STILL_SIGMAS = 3.0
@@ -166,6 +176,22 @@ def _speed_standard_error(
     residual = ps - mean - dt[:, None] * slope
     variance = (ws[:, None] * residual * residual).sum(axis=0) / (ts.size - 2)
     return math.sqrt(float(variance.sum()) / sxx)
+
+
+def _curvature_standard_error(
+    dt: np.ndarray, ps: np.ndarray, ws: np.ndarray, coef: np.ndarray
+) -> float:
+    """Standard error of the quadratic term ``coef[2]`` (its norm over the three axes)
+    of :func:`weighted_quadratic` ``coef`` through samples at time offsets ``dt`` with
+    positions ``ps`` and weights ``ws`` (from the weighted residuals); inf with three
+    samples or fewer (no residual left to judge the scatter by)."""
+    if dt.size <= 3:
+        return math.inf
+    design = np.stack([np.ones_like(dt), dt, dt * dt], axis=1)
+    residual = ps - design @ coef
+    variance = (ws[:, None] * residual * residual).sum(axis=0) / (dt.size - 3)
+    inverse = np.linalg.pinv(design.T @ (design * ws[:, None]))
+    return math.sqrt(float(variance.sum()) * max(float(inverse[2, 2]), 0.0))
 
 
 def _spans_velocity(ts: np.ndarray, params: ParamSet) -> bool:
@@ -373,7 +399,8 @@ class StreamingDetector:
         self._tail: tuple[_TrackSample, ...] = ()
         # report_fill: samples inside its long gaps the late output also reads.
         self._inner: tuple[_TrackSample, ...] = ()
-        self._fit_cache: _TrackFit | None = None
+        # The last track fit, per weighting (True: the reported estimate's, by recency).
+        self._fit_cache: dict[bool, _TrackFit] = {}
         self._selected_conf = 0.0
         self._chosen_at = -math.inf  # stream time of the last re-clustering choosing a track
         self._now = -math.inf
@@ -850,9 +877,10 @@ class StreamingDetector:
             self._chunk_points -= int(sizes[i] - np.count_nonzero(moving))
             self._chunks[i] = _Chunk(c.stamp, c.xyz[moving], c.t[moving], c.static_keys[moving])
 
-    def _fit(self, stamp: float) -> tuple[np.ndarray, int] | None:
+    def _fit(self, stamp: float, reporting: bool = False) -> tuple[np.ndarray, int] | None:
         """Position at ``stamp`` from the track's last track_window seconds of samples
-        (ending at its newest sample). The newest sample may be at most
+        (ending at its newest sample); ``reporting``: for the estimate push() returns,
+        newer samples weighing more (``track_recency``). The newest sample may be at most
         ``max_extrapolation`` old, or ``max_gap`` for a track slower than ``min_speed``
         (a hovering drone seen once a second is where it was); past its newest sample,
         a track whose samples show no motion stays where it was then (deviation 73).
@@ -860,7 +888,9 @@ class StreamingDetector:
         ``stamp`` is a frame's stamp, the start of its scan: the frame's own returns,
         scanned over the next ``frame_period``, are part of its estimate (deviation 56).
         """
-        pred = self._predict(stamp, until=stamp + self.params.frame_period, hold_still=True)
+        pred = self._predict(
+            stamp, until=stamp + self.params.frame_period, hold_still=True, recent=reporting
+        )
         if pred is None:
             return None
         position, n, age, velocity, measured = pred
@@ -875,7 +905,11 @@ class StreamingDetector:
         return (position, n) if age <= limit else None
 
     def _predict(
-        self, stamp: float, until: float | None = None, hold_still: bool = False
+        self,
+        stamp: float,
+        until: float | None = None,
+        hold_still: bool = False,
+        recent: bool = False,
     ) -> tuple[np.ndarray, int, float, np.ndarray, bool] | None:
         """(position, points, age of the newest sample, velocity, whether the samples span
         the two frame periods a velocity needs) at ``stamp`` from a weighted
@@ -883,18 +917,20 @@ class StreamingDetector:
         seconds of them (at least the last three), or None without such a sample. The
         age is negative when the newest sample is after ``stamp``. The fit is a straight
         line or, for a track at least ``min_speed`` fast, a quadratic when at least 6
-        samples span 0.6 s, the newest is at most ``max_extrapolation`` old and the fitted
-        acceleration is at most ``max_accel``; past its newest sample the quadratic is
-        continued along its tangent there (deviation 56). With ``hold_still``, a line
-        whose samples show no motion (:attr:`_TrackFit.still`) is not continued past the
-        newest sample: the position is the line's there (deviation 73)."""
+        samples span 0.6 s (with ``track_recency``: 4 over 0.4 s, and its curvature at
+        least two standard errors), the newest is at most ``max_extrapolation`` old and
+        the fitted acceleration is at most ``max_accel``; past its newest sample the
+        quadratic is continued along its tangent there (deviation 56). With
+        ``hold_still``, a line whose samples show no motion (:attr:`_TrackFit.still`) is
+        not continued past the newest sample: the position is the line's there
+        (deviation 73)."""
         p = self.params
         cutoff = stamp if until is None else until
         newest = [s.t for s in self._track if s.t <= cutoff]
         if not newest:
             return None
         last = max(newest)
-        fit = self._track_fit(_recent_samples(self._track, last, p))
+        fit = self._track_fit(_recent_samples(self._track, last, p), recent)
         age = stamp - last
         if fit.quadratic is not None and age <= p.max_extrapolation:
             # A well-sampled, fresh, moving track: a quadratic follows a turn or a change
@@ -910,12 +946,14 @@ class StreamingDetector:
         at = last if hold_still and fit.still and age > 0.0 else stamp
         return fit.mean + fit.slope * (at - fit.tc), fit.points, age, fit.slope, fit.measured
 
-    def _track_fit(self, samples: list[_TrackSample]) -> _TrackFit:
-        """The fits :meth:`_predict` reads, through these samples; the last one is reused
+    def _track_fit(self, samples: list[_TrackSample], recent: bool = False) -> _TrackFit:
+        """The fits :meth:`_predict` reads, through these samples, weighted by recency
+        (``track_recency``) if ``recent``; the last one of each weighting is reused
         while the samples are the same (between a track's returns, every frame and every
         history frame a re-clustering catches up through asks for it again)."""
         p = self.params
-        cached = self._fit_cache
+        recent = recent and p.track_recency > 0
+        cached = self._fit_cache.get(recent)
         if (
             cached is not None
             and cached.params is p
@@ -923,13 +961,28 @@ class StreamingDetector:
             and all(a is b for a, b in zip(cached.samples, samples, strict=True))
         ):
             return cached
-        ts, ps, ws = _sample_arrays(samples)
+        ts, ps, counts = _sample_arrays(samples)
+        ws = counts
+        quad_samples, quad_span = 6, 0.6
+        if recent:
+            # Newer samples weigh more: a line over the whole window lags a drone that
+            # starts, stops or turns, by what it did early in the window (deviation 102).
+            # Only the reported estimate: which returns join the track is decided on
+            # equal weights (a weaving bird followed more closely stayed a track longer).
+            ws = counts * np.exp((ts - ts[-1]) / p.track_recency)
+            quad_samples, quad_span = _RECENT_QUAD_SAMPLES, _RECENT_QUAD_SPAN
         slope, mean, tc = _track_line(ts, ps, ws, p)
         quadratic = None
         speed = float(np.linalg.norm(slope))
-        if speed >= p.min_speed and ts.size >= 6 and ts[-1] - ts[0] >= 0.6:
+        if speed >= p.min_speed and ts.size >= quad_samples and ts[-1] - ts[0] >= quad_span:
             coef = weighted_quadratic(ts - tc, ps, ws)
-            if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
+            plausible = 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel
+            if plausible and recent:
+                # Fewer samples, weighted to the newest: the curve must stand out of the
+                # samples' scatter, or a far pass's noisy returns bend the estimate.
+                se = _curvature_standard_error(ts - tc, ps, ws, coef)
+                plausible = float(np.linalg.norm(coef[2])) >= _CURVATURE_SIGMAS * se
+            if plausible:
                 quadratic = coef
         still = speed < p.min_speed and (
             speed == 0.0
@@ -939,7 +992,7 @@ class StreamingDetector:
         fit = _TrackFit(
             tuple(samples),
             p,
-            int(ws.sum()),
+            int(counts.sum()),
             slope,
             mean,
             tc,
@@ -948,7 +1001,7 @@ class StreamingDetector:
             still,
             measured,
         )
-        self._fit_cache = fit
+        self._fit_cache[recent] = fit
         return fit
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
@@ -1239,7 +1292,7 @@ class StreamingDetector:
             return None
         if stamp - self._origin < p.warmup:
             return None
-        fit = self._fit(stamp)
+        fit = self._fit(stamp, reporting=True)
         if fit is None:
             return None
         position, n = fit

@@ -17,7 +17,7 @@ from clusterfilter_ros.core.streaming import (
     _track_samples,
     run_streaming,
 )
-from clusterfilter_ros.core.trajectory import weighted_line
+from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
 from clusterfilter_ros.errors import ParameterError
 
 
@@ -274,18 +274,23 @@ def test_a_still_track_is_not_extrapolated_past_its_newest_sample():
     # their line drifts at 0.23 m/s, below min_speed (1 m/s) and within three standard
     # errors (0.21 m/s each) of zero: 0.8 s after the newest sample the estimate is where
     # the line was at that sample, not 0.19 m further on.
+    # The same with the newer samples weighing more (track_recency).
     times = [0.0, 0.3, 0.6, 0.9]
     path = np.array([(x, 5.0, 20.0) for x in (10.0, 10.25, 10.05, 10.3)])
-    det = _tracked(times, path)
-    slope, mean, tc = weighted_line(np.array(times), path, np.full(4, 3.0))
-    assert slope[0] == pytest.approx(0.233, abs=0.001)
-    for stamp in (0.9, 1.2, 1.7):
-        pos, _ = det._fit(stamp)
-        np.testing.assert_allclose(pos, mean + slope * (0.9 - tc), atol=1e-9)
-    # Within the samples the line is kept: a frame stamped before the newest sample
-    # (whose scan holds it) is estimated on the line at its stamp.
-    pos, _ = det._fit(0.85)
-    np.testing.assert_allclose(pos, mean + slope * (0.85 - tc), atol=1e-9)
+    for recency in (0.0, 0.5):
+        det = _tracked(times, path, track_recency=recency)
+        weights = np.full(4, 3.0)
+        if recency:
+            weights *= np.exp((np.array(times) - 0.9) / recency)
+        slope, mean, tc = weighted_line(np.array(times), path, weights)
+        assert slope[0] == pytest.approx(0.266 if recency else 0.233, abs=0.001)
+        for stamp in (0.9, 1.2, 1.7):
+            pos, _ = det._fit(stamp, reporting=True)
+            np.testing.assert_allclose(pos, mean + slope * (0.9 - tc), atol=1e-9)
+        # Within the samples the line is kept: a frame stamped before the newest sample
+        # (whose scan holds it) is estimated on the line at its stamp.
+        pos, _ = det._fit(0.85, reporting=True)
+        np.testing.assert_allclose(pos, mean + slope * (0.85 - tc), atol=1e-9)
     # A drone setting off from a hover at 0.7 m/s, seen in every frame: as slow, but its
     # samples lie on the line, so it is extrapolated.
     times = np.arange(0.0, 1.0, 0.1)
@@ -355,6 +360,59 @@ def test_past_its_newest_sample_an_accelerating_track_follows_its_tangent():
     assert abs(pos[0] - 10.0) < 0.06
 
 
+def test_newer_samples_weigh_more_so_a_braking_track_is_not_carried_on():
+    # A far drone seen every 0.25 s (five samples in the 1 s window, too few for the
+    # equal-weight quadratic) cruising at 5 m/s, braking at 5 m/s^2 from 0.5 s. With
+    # equal weights the line through the window carries it on at its mean speed: 0.68 m
+    # ahead 0.2 s after the newest sample. With track_recency the newer samples, slower,
+    # weigh more and a quadratic needs only four samples: 0.21 m.
+    def x(t: float) -> float:
+        return 5.0 * t if t < 0.5 else 2.5 + 5.0 * (t - 0.5) - 2.5 * (t - 0.5) ** 2
+
+    times = [0.0, 0.25, 0.5, 0.75, 1.0]
+    path = [(10.0 + x(t), 5.0, 20.0) for t in times]
+    truth = 10.0 + x(1.2)
+    equal = _tracked(times, path, track_recency=0.0)
+    assert equal._fit(1.2, reporting=True)[0][0] - truth == pytest.approx(0.675, abs=0.01)
+    assert equal._fit_cache[False].quadratic is None
+    recent = _tracked(times, path, track_recency=0.5)
+    assert recent._fit(1.2, reporting=True)[0][0] - truth == pytest.approx(0.21, abs=0.01)
+    assert recent._fit_cache[True].quadratic is not None
+    # The support count stays the returns in the window, whatever their weights; which
+    # returns join the track is decided on equal weights.
+    assert recent._fit(1.2, reporting=True)[1] == equal._fit(1.2)[1] == 15
+    np.testing.assert_array_equal(recent._predict(1.2)[0], equal._predict(1.2)[0])
+
+
+def test_with_recency_a_quadratic_must_stand_out_of_the_scatter():
+    from clusterfilter_ros.core.streaming import _curvature_standard_error
+
+    # A straight 10 m/s pass whose samples scatter 0.1 m across it: the recency-weighted
+    # quadratic bends 0.5 m/s^2 (well under max_accel) but within one standard error of
+    # none, so the estimate is the line's. Exactly on a parabola the curve is kept.
+    times = np.arange(0.0, 1.01, 0.2)
+    scatter = [0.1 * (-1) ** i for i in range(times.size)]
+    path = np.array([(10.0 + 10.0 * t, 5.0 + d, 20.0) for t, d in zip(times, scatter, strict=True)])
+    det = _tracked(times, path, track_recency=0.5)
+    det._fit(1.2, reporting=True)
+    assert det._fit_cache[True].quadratic is None
+    weights = 3.0 * np.exp((times - 1.0) / 0.5)
+    tc = float(np.average(times, weights=weights))
+    coef = weighted_quadratic(times - tc, path, weights)
+    assert 2.0 * np.linalg.norm(coef[2]) == pytest.approx(0.535, abs=0.01)
+    assert _curvature_standard_error(times - tc, path, weights, coef) > np.linalg.norm(coef[2])
+    curve = np.array([(10.0 + 10.0 * t + 2.0 * t * t, 5.0, 20.0) for t in times])
+    coef = weighted_quadratic(times - tc, curve, weights)
+    assert _curvature_standard_error(times - tc, curve, weights, coef) == pytest.approx(
+        0.0, abs=1e-6
+    )
+    det = _tracked(times, curve, track_recency=0.5)
+    assert det._fit(1.2, reporting=True)[0][0] == pytest.approx(10.0 + 12.0 + 14.0 * 0.2, abs=0.02)
+    assert det._fit_cache[True].quadratic is not None
+    # Three samples leave no residual to judge by.
+    assert _curvature_standard_error(times[:3], curve[:3], weights[:3], coef) == np.inf
+
+
 def _restamped(frame: Frame, stamp: float) -> Frame:
     return Frame(stamp, frame.sensor, frame.xyz, frame.intensity, frame.point_time)
 
@@ -366,24 +424,24 @@ def test_the_track_fit_is_reused_only_while_its_samples_and_parameters_stay_the_
     path = [(10.0 + 4.0 * t + 1.5 * t * t, 5.0, 20.0) for t in times]
     det = _tracked(times, path)
     first = det._predict(1.2)
-    fit = det._fit_cache
+    fit = det._fit_cache[False]
     assert fit is not None and fit.quadratic is not None
     # Later stamps with the same samples: the same fit, evaluated further along.
     second = det._predict(1.3)
-    assert det._fit_cache is fit
+    assert det._fit_cache[False] is fit
     assert second[0][0] > first[0][0]
     # A new sample: a new fit, equal to one made from scratch.
     det._track.append(_TrackSample(1.1, np.array([15.0, 5.0, 20.0]), np.zeros((3, 3), np.float32)))
     moved = det._predict(1.3)
-    assert det._fit_cache is not fit
+    assert det._fit_cache[False] is not fit
     fresh = _tracked([*times, 1.1], [*path, (15.0, 5.0, 20.0)])._predict(1.3)
     np.testing.assert_array_equal(moved[0], fresh[0])
     assert moved[1:3] == fresh[1:3]
     # New parameters: refitted with them (a track_window too short for the quadratic).
-    refit = det._fit_cache
+    refit = det._fit_cache[False]
     det.update_params({"track_window": 0.3})
     narrow = det._predict(1.3)
-    assert det._fit_cache is not refit and det._fit_cache.quadratic is None
+    assert det._fit_cache[False] is not refit and det._fit_cache[False].quadratic is None
     assert narrow[1] < moved[1]
 
 
