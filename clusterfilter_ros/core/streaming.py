@@ -327,6 +327,19 @@ class _HistorySnapshot:
 
 
 @dataclass(frozen=True)
+class _LateSamples:
+    """Samples beside a track's own that only the late output reads (report_lag), of
+    returns the re-clustering grew the chosen track into."""
+
+    # report_extend_head: before the track's first sample.
+    head: tuple[_TrackSample, ...] = ()
+    # report_extend_tail: after the track's newest sample.
+    tail: tuple[_TrackSample, ...] = ()
+    # report_fill: inside the track's gaps longer than max_gap, on its path.
+    inner: tuple[_TrackSample, ...] = ()
+
+
+@dataclass(frozen=True)
 class _TrackChoice:
     """The outcome of a re-clustering: the new static voxels and the track's samples."""
 
@@ -341,15 +354,7 @@ class _TrackChoice:
     # No track chosen, and nothing near the reported track's prediction was rejected
     # for what it is (its recent returns were noise, or too few to be a candidate).
     coast: bool = False
-    # report_extend_head: samples before the track's first one, of returns the track
-    # grew back into (the late output's only).
-    head: tuple[_TrackSample, ...] = ()
-    # report_extend_tail: samples after the track's newest one, of returns the track grew
-    # forward into (the late output's only).
-    tail: tuple[_TrackSample, ...] = ()
-    # report_fill: samples inside the track's gaps longer than max_gap, of returns on its
-    # path (the late output's only).
-    inner: tuple[_TrackSample, ...] = ()
+    late: _LateSamples = _LateSamples()
 
 
 class StreamingDetector:
@@ -393,12 +398,8 @@ class StreamingDetector:
         self._chunk_points = 0
         self._denoise_recent: dict[str, voxel.SlidingVoxelCounts] = {}
         self._track: deque[_TrackSample] = deque()
-        # report_extend_head: the track's earlier samples the late output also reads.
-        self._head: tuple[_TrackSample, ...] = ()
-        # report_extend_tail: its later samples the late output also reads.
-        self._tail: tuple[_TrackSample, ...] = ()
-        # report_fill: samples inside its long gaps the late output also reads.
-        self._inner: tuple[_TrackSample, ...] = ()
+        # The track's grown head and tail and its filled gaps (the late output's only).
+        self._late = _LateSamples()
         # The last track fit, per weighting (True: the reported estimate's, by recency).
         self._fit_cache: dict[bool, _TrackFit] = {}
         self._selected_conf = 0.0
@@ -673,17 +674,13 @@ class StreamingDetector:
         if self.params.static_suppression and self._static.size:
             self._drop_static_from_history()
         old_track = list(self._track)
-        old_head = self._head
-        old_tail = self._tail
-        old_inner = self._inner
+        old_late = self._late
         old_conf = self._selected_conf
         old_velocity = None  # only needed when nothing was chosen (deviation 77)
         if choice.samples is None and old_track and old_conf >= self.params.min_confidence:
             old_velocity = self._track_state()[2]
         self._track.clear()
-        self._head = ()
-        self._tail = ()
-        self._inner = ()
+        self._late = _LateSamples()
         self._selected_conf = 0.0
         self._clusters = choice.clusters
         self._foreground_points = choice.foreground_points
@@ -691,9 +688,7 @@ class StreamingDetector:
         if choice.samples is not None:
             self._selected_conf = choice.confidence
             self._track.extend(choice.samples)
-            self._head = choice.head
-            self._tail = choice.tail
-            self._inner = choice.inner
+            self._late = choice.late
             if choice.confidence >= p.min_confidence:
                 self._chosen_at = choice.snapshot.now
             if choice.new_track:
@@ -706,12 +701,11 @@ class StreamingDetector:
             # only too little of it to confirm it again.
             self._selected_conf = p.min_confidence
             self._track.extend(old_track)
-            self._head = old_head
-            self._tail = old_tail
-            self._inner = old_inner
+            self._late = old_late
             self._catch_up()
         if self.params.report_lag > 0 and old_track and old_conf >= self.params.min_confidence:
-            old = [*old_head, *old_inner, *old_track, *_after(old_tail, old_track)]
+            old_core = [*old_late.head, *old_late.inner, *old_track]
+            old = [*old_core, *_after(old_late.tail, old_track)]
             self._archive_piece(old, old_conf, choice.snapshot.now)
         ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
@@ -752,7 +746,7 @@ class StreamingDetector:
         later re-clustering)."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
-        samples = (*self._head, *self._track) if current else ()
+        samples = (*self._late.head, *self._track) if current else ()
         first = min((s.t for s in samples), default=math.inf)
         kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
         piece = _TrackPiece(*_sample_arrays(kept), confidence) if kept else None
@@ -1057,7 +1051,7 @@ class StreamingDetector:
         while lagged and (lagged[0] <= until or len(lagged) > _MAX_LAGGED):
             stamp = lagged[0]
             on_tail = False  # past a track's cluster, on its grown tail (deviation 99)
-            if self._tail and p.report_extend_tail:
+            if self._late.tail and p.report_extend_tail:
                 if tracks is None:
                     tracks = self._delayed_tracks()
                 on_tail = any(tr.tail_from < stamp <= tr.extends_until for tr in tracks)
@@ -1213,8 +1207,9 @@ class StreamingDetector:
         self._prune_archive()
         pieces = list(self._archive)
         if self._track and self._selected_conf >= p.min_confidence:
-            core = sorted((*self._head, *self._inner, *self._track), key=lambda s: s.t)
-            tail = _after(self._tail, core)
+            late = self._late
+            core = sorted((*late.head, *late.inner, *self._track), key=lambda s: s.t)
+            tail = _after(late.tail, core)
             current = _TrackPiece(*_sample_arrays([*core, *tail]), self._selected_conf)
             # Like a kept piece, only up to where the live output reported it: a track just
             # chosen that push() has not reported (yet) must not take the frames that the
@@ -1346,9 +1341,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             n,
             ms,
             coast,
-            head=head,
-            tail=tail,
-            inner=inner,
+            late=_LateSamples(head, tail, inner),
         )
 
     if xyz is None or t is None or t.size == 0:
