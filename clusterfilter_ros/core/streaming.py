@@ -338,6 +338,14 @@ class _LateSamples:
     # report_fill: inside the track's gaps longer than max_gap, on its path.
     inner: tuple[_TrackSample, ...] = ()
 
+    def around(
+        self, track: Iterable[_TrackSample]
+    ) -> tuple[list[_TrackSample], list[_TrackSample]]:
+        """The samples the late output reads for ``track``: (its own, head and inner
+        ones in time order; the tail's beyond the newest of them)."""
+        core = sorted((*self.head, *self.inner, *track), key=lambda s: s.t)
+        return core, _after(self.tail, core)
+
 
 @dataclass(frozen=True)
 class _TrackChoice:
@@ -704,9 +712,8 @@ class StreamingDetector:
             self._late = old_late
             self._catch_up()
         if self.params.report_lag > 0 and old_track and old_conf >= self.params.min_confidence:
-            old_core = [*old_late.head, *old_late.inner, *old_track]
-            old = [*old_core, *_after(old_late.tail, old_track)]
-            self._archive_piece(old, old_conf, choice.snapshot.now)
+            core, tail = old_late.around(old_track)
+            self._archive_piece([*core, *tail], old_conf, choice.snapshot.now)
         ms = self._job_ms + choice.elapsed_ms + (time.perf_counter() - start) * 1e3
         self._last_recluster_ms = ms
         self._recluster_ms_total += ms
@@ -1207,9 +1214,7 @@ class StreamingDetector:
         self._prune_archive()
         pieces = list(self._archive)
         if self._track and self._selected_conf >= p.min_confidence:
-            late = self._late
-            core = sorted((*late.head, *late.inner, *self._track), key=lambda s: s.t)
-            tail = _after(late.tail, core)
+            core, tail = self._late.around(self._track)
             current = _TrackPiece(*_sample_arrays([*core, *tail]), self._selected_conf)
             # Like a kept piece, only up to where the live output reported it: a track just
             # chosen that push() has not reported (yet) must not take the frames that the
