@@ -146,8 +146,11 @@ class _TrackPiece:
     tail_from: float = math.inf
 
 
-#: With ``track_recency``, the samples and span a moving track's live quadratic needs
-#: (deviation 102; without it 6 samples over 0.6 s).
+#: The samples, and the seconds they span, a quadratic fit of a track needs (live, and
+#: around a late estimate's stamp).
+_QUAD_SAMPLES = 6
+_QUAD_SPAN = 0.6
+#: With ``track_recency``, the same for the live quadratic (deviation 102).
 _RECENT_QUAD_SAMPLES = 4
 _RECENT_QUAD_SPAN = 0.4
 #: ... and its quadratic term must be at least this many standard errors from zero.
@@ -964,7 +967,7 @@ class StreamingDetector:
             return cached
         ts, ps, counts = _sample_arrays(samples)
         ws = counts
-        quad_samples, quad_span = 6, 0.6
+        quad_samples, quad_span = _QUAD_SAMPLES, _QUAD_SPAN
         if recent:
             # Newer samples weigh more: a line over the whole window lags a drone that
             # starts, stops or turns, by what it did early in the window (deviation 102).
@@ -1762,7 +1765,7 @@ def smoothed_position(
         if not near.any():  # only with max_extrapolation beyond both of those
             return None
     tt, pp, ww = ts[near], ps[near], ws[near]
-    if tt.size >= 6 and tt[-1] - tt[0] >= 0.6 and tt[0] <= stamp <= tt[-1]:
+    if tt.size >= _QUAD_SAMPLES and tt[-1] - tt[0] >= _QUAD_SPAN and tt[0] <= stamp <= tt[-1]:
         tc = float(np.average(tt, weights=ww))
         coef = weighted_quadratic(tt - tc, pp, ww)
         if 2.0 * float(np.linalg.norm(coef[2])) <= p.max_accel:
