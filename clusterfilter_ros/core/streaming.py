@@ -1266,15 +1266,31 @@ class StreamingDetector:
         (:meth:`_reported_until`): a re-clustering's linking can join another object's
         earlier returns to the drone's cluster, and the late output then reported them
         (deviation 85; since deviation 91 also at gaps shorter than ``max_gap``: a bird's
-        returns 0.9 s before the drone's first, in the cluster confirmed later)."""
+        returns 0.9 s before the drone's first, in the cluster confirmed later); then,
+        with ``report_head_path``, without its samples before its first live report that
+        lie off the path the later ones trace back (:func:`_off_path_before`, deviation
+        103)."""
         p = self.params
         for k in np.flatnonzero(np.diff(chain.ts) > p.report_head_gap)[::-1] + 1:
             earlier = _TrackPiece(chain.ts[:k], chain.ps[:k], chain.ws[:k], 0.0)
             later = _TrackPiece(chain.ts[k:], chain.ps[k:], chain.ws[k:], 0.0)
             if _could_continue(earlier, later, p) or self._reported_until(earlier) > -math.inf:
                 continue
-            return dataclasses.replace(chain, ts=later.ts, ps=later.ps, ws=later.ws)
-        return chain
+            chain = dataclasses.replace(chain, ts=later.ts, ps=later.ps, ws=later.ws)
+            break
+        if not p.report_head_path:
+            return chain
+        # Before its first live report, the samples off the path the later ones trace
+        # back: a cluster that began with another object's returns where they met the
+        # drone's path (deviation 103).
+        first = next(self._reported_stamps(chain, newest_first=False), None)
+        start = 0 if first is None else int(np.searchsorted(chain.ts, first))
+        if start <= 0 or start >= chain.ts.size:
+            return chain
+        keep = ~_off_path_before(chain.ts, chain.ps, chain.ws, start, p)
+        if keep.all():
+            return chain
+        return dataclasses.replace(chain, ts=chain.ts[keep], ps=chain.ps[keep], ws=chain.ws[keep])
 
     def _delayed_estimate(self, stamp: float, piece: _TrackPiece) -> Estimate | None:
         """The delayed estimate at ``stamp`` from one track's samples, or None where they
@@ -1579,6 +1595,40 @@ def _reaches(
     dt = t - since
     reach = p.track_gate + 0.5 * p.link_max_accel * dt * dt
     return float(np.linalg.norm(mean + slope * (t - tc) - position)) <= reach
+
+
+def _off_path_before(
+    ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, start: int, params: ParamSet
+) -> np.ndarray:
+    """(S,) bool: the track samples (times ``ts`` ascending) before index ``start`` that
+    lie off the path the samples after them trace back in time. Walking back from
+    ``start``, each sample is judged by the straight line through the kept samples after
+    it (the first ``track_window`` of them, at least the first three within
+    ``link_max_gap``, as :func:`_recent_samples` takes the last ones) and kept if an
+    object on that line could have been there (:func:`_reaches`), or while the line
+    spans less than two frame periods: deviation 60's own-path test, backward
+    (deviation 103)."""
+    p = params
+    off = np.zeros(ts.size, dtype=bool)
+    span = max(p.track_window, p.link_max_gap)
+    kept = list(range(ts.size - 1, start - 1, -1))  # newest first: kept[-1] is the earliest
+    for i in range(start - 1, -1, -1):
+        earliest = float(ts[kept[-1]])
+        recent = []
+        for k in reversed(kept):
+            if ts[k] > earliest + p.track_window:
+                break
+            recent.append(k)
+        if len(recent) < 3:
+            recent = [k for k in reversed(kept[-3:]) if ts[k] <= earliest + span]
+        idx = np.asarray(recent)
+        if _spans_velocity(ts[idx], p) and not _reaches(
+            ts[idx], ps[idx], ws[idx], earliest, float(ts[i]), ps[i], p
+        ):
+            off[i] = True
+            continue
+        kept.append(i)
+    return off
 
 
 def _track_cluster(

@@ -278,6 +278,53 @@ def test_a_bird_that_met_the_drones_path_is_cut_at_a_gap_shorter_than_max_gap():
     np.testing.assert_array_equal(det._without_unreported_head(chain).ts, ts)
 
 
+def test_returns_off_the_path_the_track_traces_back_are_not_reported_late():
+    # A bird's returns 6 m off the drone's path began the cluster the live output
+    # confirmed later (fast_pass 4300 of the forty-second set: the late output followed
+    # the bird, 2-15 m off, for 1.1 s); the gap after them (0.3 s) is under
+    # report_head_gap, so only the path the drone's own returns trace back tells them
+    # apart. A lone return of something else among the drone's early ones goes too.
+    bird_t, drone_t = np.array([0.0, 0.1, 0.2]), np.arange(0.5, 4.0, 0.1)
+    stray_t = 1.05
+    ts = np.sort(np.concatenate([bird_t, drone_t, [stray_t]]))
+    ps = _line(ts)
+    ps[: bird_t.size] += [0.0, 6.0, 0.0]
+    stray = int(np.flatnonzero(ts == stray_t)[0])
+    ps[stray] += [0.0, 0.0, 5.0]
+    chain = _piece(ts, ps, conf=0.8)
+    det = _detector_with([])
+    # Never reported live: nothing to trace back from (the gap rule alone decides).
+    np.testing.assert_array_equal(det._without_unreported_head(chain).ts, ts)
+    det._live_reports.append((2.0, _line(np.array([2.0]))[0]))
+    np.testing.assert_allclose(det._without_unreported_head(chain).ts, drone_t)
+    det.update_params({"report_head_path": False})
+    np.testing.assert_array_equal(det._without_unreported_head(chain).ts, ts)
+    # The drone's own head, accelerating at 3 m/s^2 (under link_max_accel) before the
+    # live output took it: kept whole.
+    ts = np.arange(0.0, 4.0, 0.1)
+    ps = _line(ts) + np.outer(0.5 * 3.0 * (ts - 2.0).clip(max=0.0) ** 2, [1.0, 0.0, 0.0])
+    det = _detector_with([])
+    det._live_reports.append((3.0, ps[30]))
+    np.testing.assert_array_equal(det._without_unreported_head(_piece(ts, ps)).ts, ts)
+
+
+def test_off_path_before_walks_back_from_the_trusted_samples():
+    ts = np.arange(0.0, 3.0, 0.1)
+    ps = _line(ts)
+    ws = np.ones(ts.size)
+    assert not streaming._off_path_before(ts, ps, ws, 10, P).any()
+    ps[[2, 5]] += [0.0, 4.0, 0.0]  # two returns of something else, 4 m off
+    np.testing.assert_array_equal(
+        np.flatnonzero(streaming._off_path_before(ts, ps, ws, 10, P)), [2, 5]
+    )
+    # Only before start: the trusted samples are not judged.
+    assert not streaming._off_path_before(ts, ps, ws, 2, P)[2:].any()
+    # Trusted samples spanning under two frame periods give no velocity: the sample
+    # before them is kept, however far off.
+    assert not streaming._off_path_before(ts[4:7], ps[4:7], ws[4:7], 1, P).any()
+    assert streaming._off_path_before(ts[4:10], ps[4:10], ws[4:10], 2, P)[1]
+
+
 def test_a_stray_beside_a_gap_does_not_cut_the_drones_own_head():
     # The drone's own returns with a 0.75 s gap; the sample just before the gap is a lone
     # return of something else 4 m off, which bent the earlier side's line enough that
