@@ -319,6 +319,11 @@ def test_off_path_before_walks_back_from_the_trusted_samples():
     )
     # Only before start: the trusted samples are not judged.
     assert not streaming._off_path_before(ts, ps, ws, 2, P)[2:].any()
+    # A sample more than max_gap (1 s) before the next kept one is not judged: across
+    # such a gap a drone may have turned (avia_only 4203 of the forty-first set).
+    ts_gap = np.concatenate([[0.0], np.arange(1.2, 3.0, 0.1)])
+    ps_gap = _line(ts_gap) + np.outer(ts_gap == 0.0, [0.0, 9.0, 0.0])
+    assert not streaming._off_path_before(ts_gap, ps_gap, np.ones(ts_gap.size), 1, P).any()
     # Trusted samples spanning under two frame periods give no velocity: the sample
     # before them is kept, however far off.
     assert not streaming._off_path_before(ts[4:7], ps[4:7], ws[4:7], 1, P).any()
