@@ -1177,10 +1177,11 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "bool",
         True,
         "report_lag: the late output leaves out a track's returns before its first live "
-        "report that lie off the path its later returns trace back in time (within "
-        "max_gap of them, farther than track_gate plus link_max_accel x dt^2 / 2 from the "
-        "line through the next second of them): another object's returns that met the "
-        "drone's path and began its cluster; false = keep them.",
+        "report that lie off the path its later returns trace back in time (farther than "
+        "track_gate plus link_max_accel x dt^2 / 2 from the line through the next second "
+        "of them; a return followed by a gap over max_gap is not judged): another "
+        "object's returns that met the drone's path and began its cluster; false = keep "
+        "them.",
     ),
     ParamSpec(
         "report_extend_head",

@@ -1606,17 +1606,18 @@ def _off_path_before(
     it (the first ``track_window`` of them, at least the first three within
     ``link_max_gap``, as :func:`_recent_samples` takes the last ones) and kept if an
     object on that line could have been there (:func:`_reaches`), while the line spans
-    less than two frame periods, or when the sample lies more than ``max_gap`` before
-    them: deviation 60's own-path test, backward (deviation 103)."""
+    less than two frame periods, or when the next sample (kept or not) comes more than
+    ``max_gap`` after it: deviation 60's own-path test, backward (deviation 103)."""
     p = params
     off = np.zeros(ts.size, dtype=bool)
     span = max(p.track_window, p.link_max_gap)
     kept = list(range(ts.size - 1, start - 1, -1))  # newest first: kept[-1] is the earliest
     for i in range(start - 1, -1, -1):
         earliest = float(ts[kept[-1]])
-        if earliest - ts[i] > p.max_gap:
-            # Across a gap longer than max_gap a line carried back says little: a drone
-            # 70 m up that turned in the 1.7 s before its next return was 9 m off it.
+        if ts[i + 1] - ts[i] > p.max_gap:
+            # Across a gap in the returns longer than max_gap a line carried back says
+            # little: a drone 70 m up that turned in the 1.7 s before its next return
+            # was 9 m off it.
             kept.append(i)
             continue
         recent = []
