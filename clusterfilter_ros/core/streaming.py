@@ -1613,13 +1613,13 @@ def _off_path_before(
     span = max(p.track_window, p.link_max_gap)
     kept = list(range(ts.size - 1, start - 1, -1))  # newest first: kept[-1] is the earliest
     for i in range(start - 1, -1, -1):
-        earliest = float(ts[kept[-1]])
         if ts[i + 1] - ts[i] > p.max_gap:
             # Across a gap in the returns longer than max_gap a line carried back says
             # little: a drone 70 m up that turned in the 1.7 s before its next return
             # was 9 m off it.
             kept.append(i)
             continue
+        earliest = float(ts[kept[-1]])
         recent = []
         for k in reversed(kept):
             if ts[k] > earliest + p.track_window:
