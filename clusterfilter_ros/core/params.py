@@ -273,6 +273,26 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         minimum=0.1,
         maximum=60.0,
     ),
+    ParamSpec(
+        "track_denoised",
+        "bool",
+        True,
+        "Streaming: the live track also takes the returns the denoise dropped, at least "
+        "denoised_min_range out, within track_gate of where it is heading (its next frame's "
+        "returns, as with the denoised ones): a far, fast drone's isolated Avia returns; "
+        "the clustering never reads them; false = only the denoised points.",
+    ),
+    ParamSpec(
+        "denoised_min_range",
+        "float",
+        40.0,
+        "Streaming: the returns the denoise dropped that the live track (track_denoised) "
+        "and the late output's growth (report_denoised) may take lie at least this far (m) "
+        "from the output frame's origin: nearer, a drone gives several returns a frame and "
+        "passes the denoise, and the sensor's spurious returns crowd there.",
+        minimum=0.0,
+        maximum=1000.0,
+    ),
     # --- static-structure suppression (persistence form of the relative density) ---
     ParamSpec(
         "static_suppression",
@@ -1216,6 +1236,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "track (the linking reach over half the gap, at most track_gate from the chord): "
         "a far pass's single returns between the frames the clustering kept. The live "
         "output does not use them; false = off.",
+    ),
+    ParamSpec(
+        "report_denoised",
+        "bool",
+        True,
+        "report_lag: the late output's growth and fill (report_extend_head, "
+        "report_extend_tail, report_fill) may also take the returns the denoise dropped, "
+        "outside static structure, as offline's growth does (extend_denoised): a far, fast "
+        "drone's isolated Avia returns, at least denoised_min_range out. They are kept for "
+        "local_history (at most max_local_points); the clustering never reads them; false "
+        "= only noise and small clusters of the history.",
     ),
     ParamSpec(
         "report_bridge",

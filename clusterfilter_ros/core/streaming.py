@@ -323,6 +323,8 @@ class _HistorySnapshot:
     xyz: np.ndarray | None  # (N, 3) float32; None while warming up or with no history
     t: np.ndarray | None  # (N,) float64
     static_keys: np.ndarray | None  # (N,) int64 static_voxel keys of the points
+    # report_denoised: the far points the denoise dropped (xyz, t, static_voxel keys)
+    dropped: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     expected: tuple[np.ndarray, float] | None  # (position, gate) of the reported track
     # (time, position) of the reported track's newest sample, with ``expected``
     newest: tuple[float, np.ndarray] | None
@@ -407,6 +409,9 @@ class StreamingDetector:
         self._pending: list[tuple[np.ndarray, np.ndarray]] = []
         self._chunks: deque[_Chunk] = deque()
         self._chunk_points = 0
+        # report_denoised: the far points the denoise dropped, per frame, as the history.
+        self._dropped: deque[_Chunk] = deque()
+        self._dropped_points = 0
         self._denoise_recent: dict[str, voxel.SlidingVoxelCounts] = {}
         self._track: deque[_TrackSample] = deque()
         # The track's grown head and tail and its filled gaps (the late output's only).
@@ -494,8 +499,14 @@ class StreamingDetector:
             self._origin = stamp
         xyz, t = frame_points(frame, self.params)
         self._now = max(self._now, stamp)
+        dropped = None  # the denoise's dropped returns far enough out to be kept
         if frame.sensor in self.params.denoise_sensors:
-            keep = np.flatnonzero(self._denoise(frame.sensor, stamp, xyz))
+            dense = self._denoise(frame.sensor, stamp, xyz)
+            if not dense.all() and (self._keeps_dropped() or self.params.track_denoised):
+                dropped = self._far_dropped(xyz, t, np.flatnonzero(~dense))
+                if self._keeps_dropped():
+                    self._keep_dropped(stamp, *dropped)
+            keep = np.flatnonzero(dense)
             xyz, t = xyz.take(keep, axis=0), t.take(keep)
         static_keys, uk, inverse = voxel.unique_voxel_keys(xyz, self.params.static_voxel)
         inverse = inverse.reshape(-1)
@@ -516,6 +527,13 @@ class StreamingDetector:
         caught_up = self._collect_recluster()
         if due and self._job is None:
             caught_up = self._recluster() or caught_up
+        if dropped is not None and self.params.track_denoised and dropped[1].size:
+            # track_denoised: the live track may take them too, as static-free as the rest.
+            far_xyz, far_t, far_keys = dropped
+            if self.params.static_suppression and self._static.size:
+                moving = np.flatnonzero(voxel.lookup(self._static, far_keys) < 0)
+                far_xyz, far_t = far_xyz.take(moving, axis=0), far_t.take(moving)
+            xyz, t = np.concatenate([xyz, far_xyz]), np.concatenate([t, far_t])
         if not caught_up and xyz.shape[0] and self._track:
             self._extend_track(stamp, xyz, t)
         estimate = self._estimate(stamp)
@@ -559,6 +577,7 @@ class StreamingDetector:
         """Sizes and timings of the state, for monitoring and benchmarks."""
         grid_bytes = self._background.nbytes
         local_bytes = sum(c.xyz.nbytes + c.t.nbytes + c.static_keys.nbytes for c in self._chunks)
+        local_bytes += sum(c.xyz.nbytes + c.t.nbytes + c.static_keys.nbytes for c in self._dropped)
         local_bytes += self._static.nbytes
         pending_bytes = sum(k.nbytes + t.nbytes for k, t in self._pending)
         return {
@@ -610,11 +629,42 @@ class StreamingDetector:
             return keys, t
         return uk, np.full(uk.size, (first + 0.5) * width)
 
+    def _keeps_dropped(self) -> bool:
+        """Whether the denoise's dropped points are kept (report_denoised: the late
+        output's growth or fill may take them)."""
+        p = self.params
+        return (
+            p.report_lag > 0
+            and p.report_denoised
+            and (p.report_extend_head or p.report_extend_tail or p.report_fill)
+        )
+
+    def _far_dropped(
+        self, xyz: np.ndarray, t: np.ndarray, gone: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(xyz, t, static_voxel keys) of the rows ``gone`` (dropped by the denoise) at
+        least ``denoised_min_range`` from the origin."""
+        xyz, t = xyz.take(gone, axis=0), t.take(gone)
+        near = float(self.params.denoised_min_range)
+        if near > 0:
+            far = np.flatnonzero(np.einsum("ij,ij->i", xyz, xyz) >= near * near)
+            xyz, t = xyz.take(far, axis=0), t.take(far)
+        return xyz, t, voxel.voxel_keys(xyz, self.params.static_voxel)
+
+    def _keep_dropped(self, stamp: float, xyz: np.ndarray, t: np.ndarray, keys: np.ndarray) -> None:
+        """Keep a frame's far points the denoise dropped for the late output's growth."""
+        if xyz.shape[0] == 0:
+            return
+        self._dropped.append(_Chunk(stamp, xyz, t, keys))
+        self._dropped_points += xyz.shape[0]
+
     def _evict_chunks(self) -> None:
         lo = self._now - self.params.local_history
         cap = self.params.max_local_points
         while self._chunks and (self._chunks[0].stamp < lo or self._chunk_points > cap):
             self._chunk_points -= self._chunks.popleft().xyz.shape[0]
+        while self._dropped and (self._dropped[0].stamp < lo or self._dropped_points > cap):
+            self._dropped_points -= self._dropped.popleft().xyz.shape[0]
         while self._track and self._track[0].t < lo:
             self._track.popleft()
 
@@ -642,6 +692,13 @@ class StreamingDetector:
             xyz = np.concatenate([c.xyz for c in self._chunks])
             t = np.concatenate([c.t for c in self._chunks])
             static_keys = np.concatenate([c.static_keys for c in self._chunks])
+        dropped = None
+        if xyz is not None and self._dropped_points:
+            dropped = (
+                np.concatenate([c.xyz for c in self._dropped]),
+                np.concatenate([c.t for c in self._dropped]),
+                np.concatenate([c.static_keys for c in self._dropped]),
+            )
         snapshot = _HistorySnapshot(
             now=self._now,
             origin=self._origin,
@@ -651,6 +708,7 @@ class StreamingDetector:
             xyz=xyz,
             t=t,
             static_keys=static_keys,
+            dropped=dropped,
             expected=expected,
             newest=None
             if expected is None or self._last_reported is None
@@ -1336,6 +1394,10 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         if moving.size < snap.static_keys.size:
             xyz, t = xyz.take(moving, axis=0), t.take(moving)
     structure = static if p.static_suppression else None
+    dropped = snap.dropped
+    if dropped is not None and structure is not None and structure.size:
+        off = np.flatnonzero(voxel.lookup(structure, dropped[2]) < 0)
+        dropped = (dropped[0].take(off, axis=0), dropped[1].take(off), dropped[2].take(off))
 
     pool = None  # report_extend_head: the points a chosen track may grow back into
 
@@ -1347,12 +1409,19 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         tail: tuple[_TrackSample, ...] = ()
         inner: tuple[_TrackSample, ...] = ()
         if samples and pool is not None:
+            gmask, gpool, gxyz, gt = mask, pool, xyz, t
+            if dropped is not None and dropped[1].size:
+                # report_denoised: the denoise's dropped points are growth-only.
+                gxyz = np.concatenate([xyz, dropped[0]])
+                gt = np.concatenate([t, dropped[1]])
+                gmask = np.concatenate([mask, np.zeros(dropped[1].size, bool)])
+                gpool = np.concatenate([pool, np.ones(dropped[1].size, bool)])
             if p.report_extend_head:
-                head = _grown(mask, pool, xyz, t, samples[0].t, p, forward=False)
+                head = _grown(gmask, gpool, gxyz, gt, samples[0].t, p, forward=False)
             if p.report_extend_tail:
-                tail = _grown(mask, pool, xyz, t, samples[-1].t, p, forward=True)
+                tail = _grown(gmask, gpool, gxyz, gt, samples[-1].t, p, forward=True)
             if p.report_fill:
-                inner = _filled_gaps(mask, pool, xyz, t, p)
+                inner = _filled_gaps(gmask, gpool, gxyz, gt, p)
         ms = (time.perf_counter() - start) * 1e3
         n = 0 if t is None else int(t.size)
         return _TrackChoice(

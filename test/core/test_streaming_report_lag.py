@@ -9,7 +9,7 @@ from collections.abc import Callable
 import numpy as np
 
 from clusterfilter_ros.core import streaming
-from clusterfilter_ros.core.frame import MID360, Frame
+from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.streaming import StreamingDetector, run_streaming, smoothed_position
 
@@ -860,15 +860,15 @@ def test_the_late_output_follows_a_track_forward_into_its_sparse_returns(scene, 
 
 
 def _straight_pass(
-    frames: list[Frame], returns: Callable[[float, str], int]
+    frames: list[Frame], returns: Callable[[float, str], int], height: float = 30.0
 ) -> tuple[list[Frame], Callable[[np.ndarray], np.ndarray]]:
     """The scene's frames (built with ``drone=False``) with a drone passing in a straight
-    line at 10 m/s, 30 m up; ``returns(t, sensor)`` gives its number of returns in the
-    frame ``t`` s into the scene. Returns (frames, path function of t)."""
+    line at 10 m/s, ``height`` m up; ``returns(t, sensor)`` gives its number of returns in
+    the frame ``t`` s into the scene. Returns (frames, path function of t)."""
 
     def path(t):
         t = np.asarray(t, dtype=float)
-        return np.stack([-50.0 + 10.0 * t, np.full_like(t, 5.0), np.full_like(t, 30.0)], -1)
+        return np.stack([-50.0 + 10.0 * t, np.full_like(t, 5.0), np.full_like(t, height)], -1)
 
     rng = np.random.default_rng(1)
     out = []
@@ -908,6 +908,90 @@ def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(
     stamps = np.array([e.stamp for e in late])
     err = np.linalg.norm(np.array([e.position for e in late]) - path(stamps - 1000), axis=1)
     assert err.max() < 0.5
+
+
+def test_the_late_output_fills_a_gap_with_returns_the_denoise_dropped(scene):
+    # As above, 60 m up, but the two returns inside the gap come from the Avia, alone in
+    # their neighbourhood over the past denoise_window: the denoise drops them, so they
+    # reach neither the clustering nor the fill, unless the late output keeps them for
+    # its growth and fill (report_denoised, as offline's growth takes them). The live
+    # output is unchanged (track_denoised off).
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
+    frames, path = _straight_pass(frames, _avia_returns_in_gap, height=60.0)
+    values = {"report_lag": LAG, "report_backfill": 0.0, "track_denoised": False}
+    runs = {}
+    for kept in (False, True):
+        det = StreamingDetector(detector_params(values | {"report_denoised": kept}))
+        live, delayed, _ = _push_all(frames, det)
+        runs[kept] = ([(e.stamp, e.position.tolist()) for e in live], delayed + det.flush())
+        assert (det._dropped_points > 0) == kept
+    assert runs[False][0] == runs[True][0]
+    inside = {
+        kept: [e for e in late if 1005.6 <= e.stamp <= 1006.0] for kept, (_, late) in runs.items()
+    }
+    assert inside[False] == []
+    assert len(inside[True]) >= 8  # both lidars' frames
+    late = runs[True][1]
+    stamps = np.array([e.stamp for e in late])
+    err = np.linalg.norm(np.array([e.position for e in late]) - path(stamps - 1000), axis=1)
+    assert err.max() < 0.5
+
+
+def _avia_returns_in_gap(t: float, sensor: str) -> int:
+    """Three returns a frame, but from 5.0 to 6.6 s one Avia return at 5.5 and 6.1 s."""
+    if 5.0 < t < 6.6:
+        return int(sensor == AVIA and t in (5.5, 6.1))
+    return 3
+
+
+def test_the_live_track_takes_far_returns_the_denoise_dropped(scene):
+    # The same pass: with track_denoised the live track takes the two dropped Avia
+    # returns where it is heading and is reported through the gap; without, the live
+    # output stops max_extrapolation (0.5 s) after 5.0 s. Nearer than
+    # denoised_min_range (a pass 30 m up, 30-31 m out then) they are not taken.
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
+    inside = {}
+    for height, taken in ((60.0, False), (60.0, True), (30.0, True)):
+        moved, path = _straight_pass(frames, _avia_returns_in_gap, height=height)
+        values = {"track_denoised": taken, "denoised_min_range": 40.0}
+        live = run_streaming(moved, detector_params(values))
+        inside[height, taken] = [e for e in live if 1005.6 <= e.stamp <= 1006.5]
+        if inside[height, taken]:
+            e = inside[height, taken]
+            err = np.linalg.norm(
+                np.array([x.position for x in e]) - path(np.array([x.stamp for x in e]) - 1000),
+                axis=1,
+            )
+            assert err.max() < 1.0
+    assert inside[60.0, False] == [] and inside[30.0, True] == []
+    assert len(inside[60.0, True]) >= 12
+
+
+def test_the_denoise_dropped_points_are_kept_only_for_the_late_growth(scene):
+    # Kept only with report_lag and a growth or fill to read them, for local_history.
+    frames, _, _ = scene(duration=4.0)
+    for values, kept in (
+        ({"report_lag": 0.0}, False),
+        ({"report_lag": LAG}, True),
+        ({"report_lag": LAG, "report_denoised": False}, False),
+        (
+            {
+                "report_lag": LAG,
+                "report_extend_head": False,
+                "report_extend_tail": False,
+                "report_fill": False,
+            },
+            False,
+        ),
+    ):
+        det = StreamingDetector(detector_params({"report_denoised": True} | values))
+        for f in frames:
+            det.push(f)
+        assert (det._dropped_points > 0) == kept, values
+        if kept:
+            oldest = det._dropped[0].stamp
+            assert oldest >= frames[-1].stamp - det.params.local_history
+            assert det.stats()["local_bytes"] > 0
 
 
 def test_a_frame_between_two_live_runs_on_one_track_is_reported_late(scene):
