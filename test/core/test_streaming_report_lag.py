@@ -892,15 +892,32 @@ def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(
         return 3
 
     frames, path = _straight_pass(frames, returns)
-    values = {"report_lag": LAG, "report_backfill": 0.0}
-    runs = {}
-    for fill in (False, True):
-        det = StreamingDetector(detector_params(values | {"report_fill": fill}))
+    runs, _ = _runs_with_and_without(
+        frames, {"report_lag": LAG, "report_backfill": 0.0}, "report_fill"
+    )
+    _assert_only_the_switched_run_fills_the_gap(runs, path)
+
+
+def _runs_with_and_without(
+    frames: list[Frame], values: dict, switch: str
+) -> tuple[dict[bool, tuple[list, list]], dict[bool, StreamingDetector]]:
+    """Stream ``frames`` with the bool parameter ``switch`` off and on: ({on: (live
+    (stamp, position) pairs, late estimates)}, {on: the detector after the stream})."""
+    runs, dets = {}, {}
+    for on in (False, True):
+        det = StreamingDetector(detector_params(values | {switch: on}))
         live, delayed, _ = _push_all(frames, det)
-        runs[fill] = ([(e.stamp, e.position.tolist()) for e in live], delayed + det.flush())
+        runs[on] = ([(e.stamp, e.position.tolist()) for e in live], delayed + det.flush())
+        dets[on] = det
+    return runs, dets
+
+
+def _assert_only_the_switched_run_fills_the_gap(runs: dict, path: Callable) -> None:
+    """The live outputs are the same; only the run with the switch on reports the frames
+    of 5.6-6.0 s late, and every late estimate lies within 0.5 m of ``path``."""
     assert runs[False][0] == runs[True][0]
     inside = {
-        fill: [e for e in late if 1005.6 <= e.stamp <= 1006.0] for fill, (_, late) in runs.items()
+        on: [e for e in late if 1005.6 <= e.stamp <= 1006.0] for on, (_, late) in runs.items()
     }
     assert inside[False] == []
     assert len(inside[True]) >= 8  # both lidars' frames
@@ -919,22 +936,9 @@ def test_the_late_output_fills_a_gap_with_returns_the_denoise_dropped(scene):
     frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
     frames, path = _straight_pass(frames, _avia_returns_in_gap, height=60.0)
     values = {"report_lag": LAG, "report_backfill": 0.0, "track_denoised": False}
-    runs = {}
-    for kept in (False, True):
-        det = StreamingDetector(detector_params(values | {"report_denoised": kept}))
-        live, delayed, _ = _push_all(frames, det)
-        runs[kept] = ([(e.stamp, e.position.tolist()) for e in live], delayed + det.flush())
-        assert (det._dropped_points > 0) == kept
-    assert runs[False][0] == runs[True][0]
-    inside = {
-        kept: [e for e in late if 1005.6 <= e.stamp <= 1006.0] for kept, (_, late) in runs.items()
-    }
-    assert inside[False] == []
-    assert len(inside[True]) >= 8  # both lidars' frames
-    late = runs[True][1]
-    stamps = np.array([e.stamp for e in late])
-    err = np.linalg.norm(np.array([e.position for e in late]) - path(stamps - 1000), axis=1)
-    assert err.max() < 0.5
+    runs, dets = _runs_with_and_without(frames, values, "report_denoised")
+    assert dets[False]._dropped_points == 0 and dets[True]._dropped_points > 0
+    _assert_only_the_switched_run_fills_the_gap(runs, path)
 
 
 def _avia_returns_in_gap(t: float, sensor: str) -> int:
