@@ -1249,6 +1249,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "= only noise and small clusters of the history.",
     ),
     ParamSpec(
+        "report_keep_newer",
+        "bool",
+        True,
+        "report_lag: when a re-clustering selects a track whose newest return is older "
+        "than the reported track's (an earlier cluster, the recent one rejected), the "
+        "reported track's newer returns are kept for the late output as a dropped track's "
+        "are: if the live output reported them over at least report_backfill_min_run, or "
+        "they were lost; false = they are forgotten.",
+    ),
+    ParamSpec(
         "report_bridge",
         "bool",
         True,

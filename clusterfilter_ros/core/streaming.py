@@ -826,7 +826,27 @@ class StreamingDetector:
         if piece is not None:
             until = self._reported_until(piece)
             self._archive.append(dataclasses.replace(piece, reported_until=until))
+        if current and p.report_keep_newer:
+            self._archive_newer(old_track, confidence, now, max(s.t for s in samples))
         self._prune_archive()
+
+    def _archive_newer(
+        self, old_track: list[_TrackSample], confidence: float, now: float, last: float
+    ) -> None:
+        """report_keep_newer (deviation 105): the replaced track's samples newer than the
+        new track's newest one ``last`` (the re-clustering chose a cluster that ended
+        sooner) are kept as a dropped track's would be: if lost (the newest more than
+        ``reacquire_window`` old) or if push() reported them over at least
+        ``report_backfill_min_run``."""
+        p = self.params
+        newer = [s for s in old_track if s.t > last]
+        if not newer:
+            return
+        piece = _TrackPiece(*_sample_arrays(newer), confidence)
+        lost = now - newer[-1].t > p.reacquire_window
+        if not lost and self._reported_span(piece) < p.report_backfill_min_run:
+            return
+        self._archive.append(dataclasses.replace(piece, reported_until=self._reported_until(piece)))
 
     def _reported_stamps(self, piece: _TrackPiece, newest_first: bool) -> Iterator[float]:
         """The stamps at which push() reported a position within ``track_gate`` of the
@@ -1293,7 +1313,14 @@ class StreamingDetector:
             current = dataclasses.replace(
                 current, reported_until=until, extends_until=extends, tail_from=core[-1].t
             )
-            pieces.append(current)
+            if p.report_keep_newer:
+                # Kept pieces newer than the current track (deviation 105) come after it,
+                # as their own chains, which the current one may continue.
+                newer = [pc for pc in pieces if pc.ts[0] > current.ts[-1]]
+                pieces = [pc for pc in pieces if pc.ts[0] <= current.ts[-1]]
+                pieces += [current, *newer]
+            else:
+                pieces.append(current)
         chains: list[_TrackPiece] = []
         while pieces:
             chain = pieces.pop()

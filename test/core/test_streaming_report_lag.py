@@ -507,6 +507,30 @@ def test_a_rejected_track_the_live_output_held_for_seconds_is_kept():
     assert len(archive_after_live(np.arange(2.5, 4.55, 0.1), (0.0, 8.0, 0.0))) == 0
 
 
+def test_a_reported_tracks_newer_returns_stay_when_an_older_cluster_is_chosen():
+    # Deviation 105: the reported track ran 1.0-4.8 s, reported live over 2.5-4.5 s;
+    # the re-clustering at 6.3 s chose a cluster that ended at 2.0 s (its recent one
+    # rejected). With report_keep_newer the samples after 2.0 s stay, as their own chain
+    # after the current track's, and the frames up to the newest live estimate (4.5 s)
+    # are reported late from them; without it, or with the live output having reported
+    # them for 1 s only, they are forgotten.
+    old = _old_track(np.arange(1.0, 4.9, 0.1))
+
+    def late_tracks(keep, report_t):
+        det = _detector_with([], np.arange(0.0, 2.05, 0.1))
+        det.params = det.params.copy(report_keep_newer=keep)
+        det._live_reports.extend((t, _line(np.array([t]))[0]) for t in report_t)
+        det._now = 4.8 + 1.5
+        det._archive_piece(old, 0.8, det._now)
+        return det._delayed_tracks()
+
+    chains = late_tracks(True, np.arange(2.5, 4.55, 0.1))
+    assert chains[0].ts[-1] > 4.7 and abs(chains[0].reported_until - 4.5) < 1e-9
+    assert chains[0].ts[0] < 0.1  # the current track continues into them: one chain
+    for keep, report_t in ((False, np.arange(2.5, 4.55, 0.1)), (True, np.arange(3.5, 4.55, 0.1))):
+        assert max(c.ts[-1] for c in late_tracks(keep, report_t)) < 2.1
+
+
 # --------------------------------------------------------------- smoothed_position
 
 P = detector_params()  # max_gap 1 s, max_extrapolation 0.5 s, track_window 1 s
