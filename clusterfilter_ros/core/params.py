@@ -278,9 +278,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "bool",
         True,
         "Streaming: the live track also takes the returns the denoise dropped, at least "
-        "denoised_min_range out, within track_gate of where it is heading (its next frame's "
-        "returns, as with the denoised ones): a far, fast drone's isolated Avia returns; "
-        "the clustering never reads them; false = only the denoised points.",
+        "denoised_min_range out, within track_gate of where it is heading, as it takes "
+        "each frame's denoised returns: a far, fast drone's isolated Avia returns; the "
+        "clustering never reads them; false = only the denoised points.",
     ),
     ParamSpec(
         "denoised_min_range",

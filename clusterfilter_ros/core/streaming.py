@@ -811,7 +811,8 @@ class StreamingDetector:
         forgotten, and the pieces kept before it with it, unless push() had reported it
         over at least ``report_backfill_min_run`` (:meth:`_reported_span`; deviation 93:
         what the live output held for seconds is not taken back from the late output by a
-        later re-clustering)."""
+        later re-clustering). With a new track that ends before ``old_track`` did, its
+        newer samples are judged the same way (:meth:`_archive_newer`)."""
         p = self.params
         current = bool(self._track) and self._selected_conf >= p.min_confidence
         samples = (*self._late.head, *self._track) if current else ()
@@ -1290,7 +1291,9 @@ class StreamingDetector:
         (:meth:`_without_unreported_head`: a stray would bend the line the gap next to it
         is judged by); once here for all the frames released together. A track, kept
         piece or current one (deviation 95), serves only frames up to the newest stamp at
-        which the live output reported a position on it."""
+        which the live output reported a position on it. Kept pieces newer than the
+        current track (deviation 105) come first, the current track joined to them where
+        it continues into them."""
         p = self.params
         self._prune_archive()
         pieces = list(self._archive)
