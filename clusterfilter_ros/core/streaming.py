@@ -502,9 +502,10 @@ class StreamingDetector:
         dropped = None  # the denoise's dropped returns far enough out to be kept
         if frame.sensor in self.params.denoise_sensors:
             dense = self._denoise(frame.sensor, stamp, xyz)
-            if not dense.all() and (self._keeps_dropped() or self.params.track_denoised):
+            keeps = self._keeps_dropped()
+            if not dense.all() and (keeps or self.params.track_denoised):
                 dropped = self._far_dropped(xyz, t, np.flatnonzero(~dense))
-                if self._keeps_dropped():
+                if keeps:
                     self._keep_dropped(stamp, *dropped)
             keep = np.flatnonzero(dense)
             xyz, t = xyz.take(keep, axis=0), t.take(keep)
@@ -819,11 +820,10 @@ class StreamingDetector:
         first = min((s.t for s in samples), default=math.inf)
         kept = sorted((s for s in old_track if s.t < first), key=lambda s: s.t)
         piece = _TrackPiece(*_sample_arrays(kept), confidence) if kept else None
-        if not current and now - max(s.t for s in old_track) <= p.reacquire_window:
-            # Rejected (with no current track, ``piece`` holds all of ``old_track``).
-            if piece is None or self._reported_span(piece) < p.report_backfill_min_run:
-                self._archive.clear()
-                return
+        # With no current track, ``piece`` holds all of ``old_track``: rejected unless lost.
+        if not current and (piece is None or not self._survives_drop(piece, now)):
+            self._archive.clear()
+            return
         if piece is not None:
             until = self._reported_until(piece)
             self._archive.append(dataclasses.replace(piece, reported_until=until))
@@ -839,15 +839,22 @@ class StreamingDetector:
         sooner) are kept as a dropped track's would be: if lost (the newest more than
         ``reacquire_window`` old) or if push() reported them over at least
         ``report_backfill_min_run``."""
-        p = self.params
         newer = [s for s in old_track if s.t > last]
         if not newer:
             return
         piece = _TrackPiece(*_sample_arrays(newer), confidence)
-        lost = now - newer[-1].t > p.reacquire_window
-        if not lost and self._reported_span(piece) < p.report_backfill_min_run:
-            return
-        self._archive.append(dataclasses.replace(piece, reported_until=self._reported_until(piece)))
+        if self._survives_drop(piece, now):
+            until = self._reported_until(piece)
+            self._archive.append(dataclasses.replace(piece, reported_until=until))
+
+    def _survives_drop(self, piece: _TrackPiece, now: float) -> bool:
+        """Whether a reported track's samples ``piece``, no longer the track after the
+        re-clustering of stream time ``now``, stay for the late output: lost (the newest
+        more than ``reacquire_window`` old, nothing left to re-acquire) or reported by
+        push() over at least ``report_backfill_min_run`` (deviation 93)."""
+        p = self.params
+        lost = now - float(piece.ts[-1]) > p.reacquire_window
+        return lost or self._reported_span(piece) >= p.report_backfill_min_run
 
     def _reported_stamps(self, piece: _TrackPiece, newest_first: bool) -> Iterator[float]:
         """The stamps at which push() reported a position within ``track_gate`` of the
