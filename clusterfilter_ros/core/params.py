@@ -380,6 +380,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=50.0,
     ),
     ParamSpec(
+        "hover_max_scatter",
+        "float",
+        0.35,
+        "Largest scatter (m) of a hovering candidate: the median distance of its returns "
+        "from the median position of the 7 returns nearest each in time. A drone's "
+        "returns lie on its body also while it drifts or brakes into a hover (at most "
+        "0.2 m in the simulator); a far tree crown seen a return at a time scatters "
+        "0.45-0.85 m and passed as a drone hovering (deviation 106); 0 = off.",
+        minimum=0.0,
+        maximum=50.0,
+    ),
+    ParamSpec(
         "hover_min_frames",
         "int",
         15,

@@ -383,6 +383,12 @@ def score_clusters(
             in_place = (core_extent <= params.hover_max_extent) & (
                 span_in_place >= float(params.hover_min_seconds)
             )
+            if params.hover_max_scatter > 0 and in_place.any():
+                # A drone's returns lie on its body wherever it drifts or brakes to; a
+                # far crown's few returns scatter over the crown (deviation 106).
+                near = in_place[lab]
+                scatter = local_scatter(lab[near], pts[near], tt[near], k)
+                in_place &= scatter <= float(params.hover_max_scatter)
             hovering = in_place & (frames_in_place >= params.hover_min_frames)
             if tight_frames and tight_frames < params.hover_min_frames:
                 # A small drone hovering far away fills fewer frames in the same time;
@@ -782,6 +788,44 @@ def group_quantile(groups: np.ndarray, values: np.ndarray, k: int, q: float) -> 
     """(K,) ``q`` quantile (linear interpolation) of ``values`` per group id 0..K-1 (0 for
     empty groups)."""
     return group_quantiles(groups, values, k, (q,))[0]
+
+
+#: Returns (nearest in time, each return among them) whose median position
+#: :func:`local_scatter` measures a return's distance from.
+SCATTER_NEIGHBOURS = 7
+
+
+def local_scatter(
+    groups: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, neighbours: int = SCATTER_NEIGHBOURS
+) -> np.ndarray:
+    """(K,) per group 0..k-1: the median distance of its returns from the per-axis median
+    of the ``neighbours`` returns nearest in time (the window centred on each return,
+    shifted inward at the group's ends; a group with fewer returns uses them all).
+
+    Where an object is at a moment is what its neighbours in time agree on, so a drone
+    that drifts or brakes scatters only over its body, while returns spread over a
+    still object (a far tree crown seen a return at a time) scatter over all of it.
+    Groups without members get 0.
+    """
+    out = np.zeros(k)
+    groups = np.asarray(groups, dtype=np.int64)
+    if groups.size == 0:
+        return out
+    order = lex_order(t, groups)
+    g, p = groups[order], np.asarray(xyz, dtype=np.float64)[order]
+    counts = np.bincount(g, minlength=k)
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    width = np.minimum(counts, int(neighbours))[g]
+    first, n = start[g], counts[g]
+    pos = np.arange(g.size)
+    lo = np.clip(pos - width // 2, first, first + n - width)
+    # Windows of one width at a time (at most `neighbours` widths), no loop over points.
+    dist = np.empty(g.size)
+    for w in np.unique(width):
+        rows = np.flatnonzero(width == w)
+        window = p[lo[rows, None] + np.arange(w)]
+        dist[rows] = np.linalg.norm(p[rows] - np.median(window, axis=1), axis=1)
+    return group_quantiles(g, dist, k, (0.5,))[0]
 
 
 def group_quantiles(
