@@ -790,6 +790,17 @@ def group_quantile(groups: np.ndarray, values: np.ndarray, k: int, q: float) -> 
     return group_quantiles(groups, values, k, (q,))[0]
 
 
+def _sorted_groups(
+    minor: np.ndarray, groups: np.ndarray, k: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The order that sorts by group id, then by ``minor``; the sorted ids; each group's
+    member count and its first position in that order."""
+    order = lex_order(minor, groups)
+    g = groups[order]
+    counts = np.bincount(g, minlength=k)
+    return order, g, counts, np.concatenate([[0], np.cumsum(counts)[:-1]])
+
+
 #: Returns (nearest in time, each return among them) whose median position
 #: :func:`local_scatter` measures a return's distance from.
 SCATTER_NEIGHBOURS = 7
@@ -811,10 +822,8 @@ def local_scatter(
     groups = np.asarray(groups, dtype=np.int64)
     if groups.size == 0:
         return out
-    order = lex_order(t, groups)
-    g, p = groups[order], np.asarray(xyz, dtype=np.float64)[order]
-    counts = np.bincount(g, minlength=k)
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    order, g, counts, start = _sorted_groups(t, groups, k)
+    p = np.asarray(xyz, dtype=np.float64)[order]
     width = np.minimum(counts, int(neighbours))[g]
     first, n = start[g], counts[g]
     pos = np.arange(g.size)
@@ -836,10 +845,8 @@ def group_quantiles(
     out = np.zeros((len(qs), k))
     if groups.size == 0:
         return out
-    order = lex_order(values, groups)
-    g, v = groups[order], np.asarray(values, dtype=np.float64)[order]
-    counts = np.bincount(g, minlength=k)
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    order, g, counts, start = _sorted_groups(values, groups, k)
+    v = np.asarray(values, dtype=np.float64)[order]
     has = counts > 0
     last = start[has] + counts[has] - 1
     for row, q in zip(out, qs, strict=True):
