@@ -375,7 +375,7 @@ def test_a_far_crowns_scattered_returns_are_not_a_hovering_drone():
     crown = score_clusters(lab, xyz, t, params, **kw)
     assert crown.confidence[0] < params.min_confidence
     assert not select_clusters(crown, params)
-    # Without the spread limit it passed as a drone hovering (deviation 106).
+    # Without the scatter limit it passed as a drone hovering (deviation 106).
     off = params.copy(hover_max_scatter=0.0)
     assert select_clusters(score_clusters(lab, xyz, t, off, **kw), off) == [0]
     # A drone hovering as sparsely, its returns within 0.15 m, still does.
