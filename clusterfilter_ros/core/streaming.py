@@ -532,8 +532,7 @@ class StreamingDetector:
             # track_denoised: the live track may take them too, as static-free as the rest.
             far_xyz, far_t, far_keys = dropped
             if self.params.static_suppression and self._static.size:
-                moving = np.flatnonzero(voxel.lookup(self._static, far_keys) < 0)
-                far_xyz, far_t = far_xyz.take(moving, axis=0), far_t.take(moving)
+                far_xyz, far_t = _off_static(self._static, far_keys, far_xyz, far_t)
             xyz, t = np.concatenate([xyz, far_xyz]), np.concatenate([t, far_t])
         if not caught_up and xyz.shape[0] and self._track:
             self._extend_track(stamp, xyz, t)
@@ -1415,6 +1414,17 @@ class StreamingDetector:
         return Estimate(stamp, reported_positions(position, p)[0], self._selected_conf, n)
 
 
+def _off_static(
+    static: np.ndarray, keys: np.ndarray, *arrays: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """The rows of ``arrays`` whose ``static_voxel`` ``keys`` are not in the sorted
+    ``static`` keys (the arrays themselves when none is)."""
+    rows = np.flatnonzero(voxel.lookup(static, keys) < 0)
+    if rows.size == keys.size:
+        return arrays
+    return tuple(a.take(rows, axis=0) for a in arrays)
+
+
 def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     """One re-clustering (reads only the snapshot and updates only its persistence map, so
     it may run on another thread): the pending hits enter the map, the history without
@@ -1427,14 +1437,11 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     static = snap.grid.static_keys()
     xyz, t = snap.xyz, snap.t
     if xyz is not None and snap.static_keys is not None and p.static_suppression and static.size:
-        moving = np.flatnonzero(voxel.lookup(static, snap.static_keys) < 0)
-        if moving.size < snap.static_keys.size:
-            xyz, t = xyz.take(moving, axis=0), t.take(moving)
+        xyz, t = _off_static(static, snap.static_keys, xyz, t)
     structure = static if p.static_suppression else None
     dropped = snap.dropped
     if dropped is not None and structure is not None and structure.size:
-        off = np.flatnonzero(voxel.lookup(structure, dropped[2]) < 0)
-        dropped = (dropped[0].take(off, axis=0), dropped[1].take(off), dropped[2].take(off))
+        dropped = _off_static(structure, dropped[2], *dropped)
 
     pool = None  # report_extend_head: the points a chosen track may grow back into
 
