@@ -1226,6 +1226,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "a return or two a second. The live output does not use them; false = off.",
     ),
     ParamSpec(
+        "report_grow_max_contact",
+        "float",
+        0.5,
+        "report_lag: the late output's growth past the track's end (report_extend_tail) "
+        "stops short of the first grown sample with more than this share of its returns "
+        "in or next to (26 neighbours) a static_voxel voxel of static structure: the edge "
+        "of a swaying crown the track went on into after the drone left. (Not before the "
+        "track's start: far approaches pass that close to tree lines.) 1 = off.",
+        minimum=0.0,
+        maximum=1.0,
+    ),
+    ParamSpec(
         "report_extend_tail",
         "bool",
         True,
@@ -1269,6 +1281,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "reported track's newer returns are kept for the late output as a dropped track's "
         "are: if the live output reported them over at least report_backfill_min_run, or "
         "they were lost; false = they are forgotten.",
+    ),
+    ParamSpec(
+        "report_hold_new_runs",
+        "bool",
+        True,
+        "report_lag: a frame before the first estimate of a new live run (no live estimate "
+        "within link_max_gap before the frame) that falls due before that run (pauses up "
+        "to link_max_gap included) has lasted as long as the frame is before it, at most "
+        "report_backfill_min_run, waits as a backfilled frame does: estimated once the run "
+        "has lasted that long (or from a track of report_backfill_min_points returns if it "
+        "ends sooner), dropped otherwise. A bird leg the live output took up for a moment "
+        "is not reported over the seconds before it. Needs report_backfill; false = such "
+        "a frame is estimated when due while the run is going.",
     ),
     ParamSpec(
         "report_bridge",

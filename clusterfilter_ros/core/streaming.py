@@ -42,6 +42,7 @@ one at which the live output reported a position on them.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import math
@@ -392,9 +393,11 @@ class StreamingDetector:
         self._lagged: deque[float] = deque()
         self._ready: deque[Estimate] = deque(maxlen=_MAX_LAGGED)
         # report_backfill: in stamp order, frames released while a new track's live run
-        # was still too short to backfill (stamp, None) and the estimates made after them
-        # (stamp, estimate), held so that the output stays in stamp order.
-        self._held: deque[tuple[float, Estimate | None]] = deque()
+        # was still too short to backfill (stamp, None, new_run) and the estimates made
+        # after them (stamp, estimate, False), held so that the output stays in stamp
+        # order; new_run: a frame before a new live run (report_hold_new_runs), whose
+        # run may pause for up to link_max_gap.
+        self._held: deque[tuple[float, Estimate | None, bool]] = deque()
         self.delayed_dropped = 0
         self.reset()
 
@@ -1130,7 +1133,10 @@ class StreamingDetector:
         estimated once the live run holding the first live estimate after it has lasted
         ``report_backfill_min_run``, and not at all if the run ends sooner or the wait
         exceeds ``report_backfill`` (:meth:`_resolve_held`); the estimates made meanwhile
-        are held back so that the output stays in stamp order.
+        are held back so that the output stays in stamp order. With
+        ``report_hold_new_runs`` so is a frame due after the first estimate of a new
+        live run when that run has lasted less than the frame is before it (at most
+        ``report_backfill_min_run``; :meth:`_before_new_run`, deviation 107).
 
         With ``report_extend_tail`` a frame past the current track's cluster that its
         grown tail serves (:attr:`_TrackPiece.extends_until`) is estimated when due,
@@ -1162,7 +1168,10 @@ class StreamingDetector:
                 if self._last_live < stamp:
                     continue
                 if stamp <= self._unreported_until:
-                    self._held.append((stamp, None))  # backfilled: resolved below
+                    self._held.append((stamp, None, False))  # backfilled: resolved below
+                    continue
+                if self._before_new_run(stamp):
+                    self._held.append((stamp, None, True))  # deviation 107: as backfilled
                     continue
                 shortest = p.report_lag_min_run
                 if shortest > 0 and self._live_run_seconds(stamp) < shortest:
@@ -1178,19 +1187,20 @@ class StreamingDetector:
 
     def _resolve_held(self, until: float) -> None:
         """Emit the held frames in order while the first backfilled one among them is
-        decided: estimated once its live run (:meth:`_live_run`) has lasted
-        ``report_backfill_min_run``, dropped if the run ended sooner or the frame is more
-        than ``report_backfill`` past due (``until`` inf: every frame is decided). A run
-        that ended sooner still has its frames estimated, within that wait, from a track
-        holding ``report_backfill_min_points`` returns (deviation 98)."""
+        decided: estimated once its live run (:meth:`_live_run`; for a frame before a new
+        run, with pauses up to ``link_max_gap``) has lasted :meth:`_run_needed`, dropped
+        if the run ended sooner or the frame is more than ``report_backfill`` past due
+        (``until`` inf: every frame is decided). A run that ended sooner still has its
+        frames estimated, within that wait, from a track holding
+        ``report_backfill_min_points`` returns (deviation 98)."""
         p = self.params
         held = self._held
         tracks: list[_TrackPiece] | None = None
         while held:
-            stamp, estimate = held[0]
+            stamp, estimate, new_run = held[0]
             if estimate is None:
-                run = self._live_run(stamp)
-                lasted = run is not None and run[1] - run[0] >= p.report_backfill_min_run
+                run = self._live_run(stamp, p.link_max_gap if new_run else None)
+                lasted = run is not None and run[1] - run[0] >= self._run_needed(stamp, run)
                 going = run is not None and run[2]
                 waited = stamp <= until - p.report_backfill or len(held) > _MAX_LAGGED
                 if not lasted and going and not waited:
@@ -1245,7 +1255,7 @@ class StreamingDetector:
     def _emit_in_order(self, estimate: Estimate) -> None:
         """Emit ``estimate``, or hold it behind the held frames before it."""
         if self._held:
-            self._held.append((estimate.stamp, estimate))
+            self._held.append((estimate.stamp, estimate, False))
         else:
             self._emit(estimate)
 
@@ -1253,13 +1263,13 @@ class StreamingDetector:
         self.delayed_dropped += len(self._ready) == self._ready.maxlen
         self._ready.append(estimate)
 
-    def _live_run(self, stamp: float) -> tuple[float, float, bool] | None:
+    def _live_run(self, stamp: float, gap: float | None = None) -> tuple[float, float, bool] | None:
         """(first, last stamp, still going) of the live output's run of estimates (each
-        within ``max_gap`` of the one before) that holds its first estimate at or after
-        ``stamp``; still going: its newest estimate is the newest, at most ``max_gap``
-        old. None if there is no estimate at or after ``stamp``."""
+        within ``gap``, default ``max_gap``, of the one before) that holds its first
+        estimate at or after ``stamp``; still going: its newest estimate is the newest,
+        at most ``gap`` old. None if there is no estimate at or after ``stamp``."""
         reports = self._live_reports
-        gap = self.params.max_gap
+        gap = self.params.max_gap if gap is None else gap
         if not reports or reports[-1][0] < stamp:
             return None
         # Walk back from the newest estimate, run by run, to the earliest run ending at or
@@ -1279,6 +1289,30 @@ class StreamingDetector:
             found = (start, end)
         run_start, run_end = found
         return run_start, run_end, run_end == newest and self._now - newest <= gap
+
+    def _before_new_run(self, stamp: float) -> bool:
+        """report_hold_new_runs (deviation 107): whether the frame at ``stamp``, with no
+        live estimate within ``link_max_gap`` before it, comes before the first estimate
+        of a live run (pauses up to ``link_max_gap`` inside it) that has lasted less than
+        :meth:`_run_needed` so far: a bird leg the live output takes up for a moment
+        must not be reported over the seconds before."""
+        p = self.params
+        if not p.report_hold_new_runs or p.report_backfill <= 0 or p.report_backfill_min_run <= 0:
+            return False
+        run = self._live_run(stamp, p.link_max_gap)
+        if run is None or run[0] <= stamp or run[1] - run[0] >= self._run_needed(stamp, run):
+            return False
+        reports = self._live_reports
+        i = bisect.bisect_left(reports, stamp, key=lambda r: r[0])
+        return i == 0 or stamp - reports[i - 1][0] > p.link_max_gap
+
+    def _run_needed(self, stamp: float, run: tuple[float, float, bool]) -> float:
+        """How long the live run ``run`` (of :meth:`_live_run`) after the frame at
+        ``stamp`` must last before the frame is estimated from the history before the
+        run: as long as the frame is before it, at most ``report_backfill_min_run``
+        (deviation 107; a backfilled frame, more than ``report_lag`` before it, that
+        long)."""
+        return min(self.params.report_backfill_min_run, run[0] - stamp)
 
     def _live_run_seconds(self, stamp: float) -> float:
         """How long the live run of :meth:`_live_run` lasted; inf while it is still
@@ -1464,6 +1498,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 head = _grown(gmask, gpool, gxyz, gt, samples[0].t, p, forward=False)
             if p.report_extend_tail:
                 tail = _grown(gmask, gpool, gxyz, gt, samples[-1].t, p, forward=True)
+                tail = _short_of_structure(tail, structure, p)
             if p.report_fill:
                 inner = _filled_gaps(gmask, gpool, gxyz, gt, p)
         ms = (time.perf_counter() - start) * 1e3
@@ -1648,6 +1683,26 @@ def _grown(
         return ()
     samples = _track_samples(new, xyz[sub], t[sub], params)
     return tuple(s for s in samples if (s.t > edge if forward else s.t < edge))
+
+
+def _short_of_structure(
+    samples: tuple[_TrackSample, ...], structure: np.ndarray | None, params: ParamSet
+) -> tuple[_TrackSample, ...]:
+    """report_grow_max_contact: the grown tail ``samples`` (time order, after the track's
+    newest sample) before the first one with more than that share of its returns in or
+    next to a voxel of the sorted static ``structure`` keys (:func:`structure_contact`):
+    a swaying crown's edge the growth went on into after the drone left."""
+    limit = float(params.report_grow_max_contact)
+    if not samples or limit >= 1.0 or structure is None or structure.size == 0:
+        return samples
+    sizes = [s.points.shape[0] for s in samples]
+    pts = np.concatenate([s.points for s in samples]).astype(np.float64)
+    which = np.repeat(np.arange(len(samples)), sizes)
+    share = structure_contact(
+        which, pts, len(samples), np.ones(len(samples), bool), structure, params.static_voxel
+    )
+    touching = np.flatnonzero(share > limit)
+    return samples[: touching[0]] if touching.size else samples
 
 
 def _filled_gaps(

@@ -143,7 +143,8 @@ def test_the_waiting_queue_is_bounded(monkeypatch):
 def test_delayed_estimates_nobody_takes_are_bounded(scene, monkeypatch):
     monkeypatch.setattr(streaming, "_MAX_LAGGED", 7)
     frames, _, _ = scene(duration=7.0, wall_points=200)
-    det = StreamingDetector(detector_params({"report_lag": LAG}))
+    # (Without report_hold_new_runs, whose held frames beyond 7 would be decided at once.)
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_hold_new_runs": False}))
     for f in frames:  # push() only, delayed() never called
         det.push(f)
     made = det.flush()
@@ -349,7 +350,8 @@ def test_a_stray_beside_a_gap_does_not_cut_the_drones_own_head():
 
 def _detector_with(archive, track_t=None, offset=(0.0, 0.0, 0.0)):
     # No live run length rule: these detectors have no record of live estimates.
-    det = StreamingDetector(detector_params({"report_lag": 5.0, "report_lag_min_run": 0.0}))
+    values = {"report_lag": 5.0, "report_lag_min_run": 0.0, "report_hold_new_runs": False}
+    det = StreamingDetector(detector_params(values))
     det._archive.extend(archive)
     if track_t is not None:
         # The current track, on the line (``offset`` from it).
@@ -621,7 +623,12 @@ def test_an_object_reported_live_for_a_moment_is_not_reported_over_its_history(s
     frames = _drone_gone_after(frames, 1004.2)
     late = {}
     for shortest in (0.0, 1.0):
-        values = {"report_lag": 3.0, "warmup": 4.0, "report_lag_min_run": shortest}
+        values = {
+            "report_lag": 3.0,
+            "warmup": 4.0,
+            "report_lag_min_run": shortest,
+            "report_hold_new_runs": False,  # the test below
+        }
         det = StreamingDetector(detector_params(values))
         live, delayed, _ = _push_all(frames, det)
         late[shortest] = [e.stamp - 1000.0 for e in delayed + det.flush()]
@@ -632,6 +639,93 @@ def test_an_object_reported_live_for_a_moment_is_not_reported_over_its_history(s
     # still have gone on (up to max_gap after its newest estimate).
     p = detector_params()
     assert late[1.0] == [s for s in late[0.0] if s + 3.0 <= last_live + p.max_gap + 1e-6]
+
+
+def test_frames_before_a_new_live_run_wait_until_it_has_lasted(scene):
+    # The drone's returns stop 1 s after its confirmation (a live run of about 1.5 s).
+    # The frames up to report_lag (2 s) before the confirmation fall due after it:
+    # without report_hold_new_runs they are reported then, from the track's history;
+    # with it each waits until the run has lasted as long as the frame is before it (at
+    # most report_backfill_min_run), so only the last 1.5 s before it are reported.
+    # (report_backfill_min_points off: deviation 98 would take the others back.)
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    first_live = min(e.stamp for e in run_streaming(frames))
+    short = _drone_gone_after(frames, first_live + 1.0)
+    live = run_streaming(short)
+    run = max(e.stamp for e in live) - first_live
+    assert 1.2 <= run <= 1.8
+    values = {"report_lag": LAG, "report_backfill_min_points": 0}
+    held = run_streaming(short, detector_params(values))
+    assert first_live - run - 0.15 <= min(e.stamp for e in held) <= first_live - run + 0.15
+    free = run_streaming(short, detector_params({**values, "report_hold_new_runs": False}))
+    assert min(e.stamp for e in free) < first_live - LAG + 0.15
+    # A run that lasts: every frame is reported, each once the run has lasted as long as
+    # the frame is before it, and in stamp order.
+    det = StreamingDetector(detector_params(values))
+    live, delayed, released_at = _push_all(frames, det)
+    delayed += det.flush()
+    stamps = np.array([e.stamp for e in delayed])
+    assert np.all(np.diff(stamps) > 0)
+    assert stamps.min() < first_live - LAG + 0.15
+    for e, at in zip(delayed, released_at, strict=False):
+        if e.stamp < first_live:
+            assert at >= first_live + min(first_live - e.stamp, 2.0) - 0.11
+
+
+def test_before_new_run_only_for_a_run_after_a_silence():
+    det = StreamingDetector(detector_params({"report_lag": 3.0}))
+    assert det.params.link_max_gap == 2.0 and det.params.report_backfill_min_run == 2.0
+    first = [round(0.1 * i, 1) for i in range(11)]  # 0.0-1.0 s, a run of 1 s
+    second = [4.0, 4.1, 4.2]  # after 3 s of silence, still going
+    det._live_reports.extend((s, np.zeros(3)) for s in first + second)
+    det._now = 4.2
+    assert not det._before_new_run(0.5)  # reported live itself
+    assert det._before_new_run(3.5)  # 2.5 s after the last report: a new run, 0.2 s so far
+    assert not det._before_new_run(2.5)  # within link_max_gap of one: report_bridge's
+    assert not det._before_new_run(3.9)  # 0.1 s before a run that has lasted 0.2 s
+    # The new run pauses for 1.5 s (less than link_max_gap) and goes on: one run, which
+    # has lasted 1.8 s, longer than the frame at 3.5 s is before it.
+    paused = StreamingDetector(detector_params({"report_lag": 3.0}))
+    paused._live_reports.extend((s, np.zeros(3)) for s in [*first, *second, 5.7, 5.8])
+    paused._now = 5.8
+    assert not paused._before_new_run(3.5)
+    # Paused for 2.5 s: the run of 0.2 s ended; the frame still waits (to be dropped).
+    ended = StreamingDetector(detector_params({"report_lag": 3.0}))
+    ended._live_reports.extend((s, np.zeros(3)) for s in [*first, *second, 6.7, 6.8])
+    ended._now = 6.8
+    assert ended._before_new_run(3.5)
+    off = StreamingDetector(detector_params({"report_lag": 3.0, "report_hold_new_runs": False}))
+    off._live_reports.extend((s, np.zeros(3)) for s in first + second)
+    off._now = 4.2
+    assert not off._before_new_run(3.5)
+
+
+def test_the_late_tail_stops_short_of_static_structure():
+    from clusterfilter_ros.core import voxel
+    from clusterfilter_ros.core.streaming import _short_of_structure, _TrackSample
+
+    p = detector_params({"report_lag": 3.0})
+    # Five grown tail samples 2 m apart along x; static structure at the third's voxel.
+    xs = [0.0, 2.0, 4.0, 6.0, 8.0]
+    samples = tuple(
+        _TrackSample(float(i), np.array([x, 20.0, 5.0]), np.array([[x, 20.0, 5.0]], np.float32))
+        for i, x in enumerate(xs)
+    )
+    structure = np.sort(voxel.voxel_keys(np.array([[4.0, 20.0, 5.0]]), p.static_voxel))
+    # 1.5 m voxels: the samples are in voxels 0, 1, 2, 4 and 5 along x; the second and
+    # the third are in or next to the structure's (26 neighbours): the tail stops before
+    # the second, and what lies beyond is not taken either.
+    assert [s.t for s in _short_of_structure(samples, structure, p)] == [0.0]
+    assert _short_of_structure(samples, structure, p.copy(report_grow_max_contact=1.0)) == samples
+    assert _short_of_structure(samples, np.empty(0, np.int64), p) == samples
+    assert _short_of_structure((), structure, p) == ()
+    # Half of a sample's returns next to structure is not more than half.
+    two = (
+        _TrackSample(
+            0.0, np.array([3.0, 20.0, 5.0]), np.array([[2.0, 20, 5], [8.0, 20, 5]], np.float32)
+        ),
+    )
+    assert _short_of_structure(two, structure, p) == two
 
 
 def test_live_run_seconds_finds_the_run_after_a_stamp():
