@@ -1189,20 +1189,23 @@ class StreamingDetector:
         """Emit the held frames in order while the first backfilled one among them is
         decided: estimated once its live run (:meth:`_live_run`; for a frame before a new
         run, with pauses up to ``link_max_gap``) has lasted :meth:`_run_needed`, dropped
-        if the run ended sooner or the frame is more than ``report_backfill`` past due
-        (``until`` inf: every frame is decided). A run that ended sooner still has its
-        frames estimated, within that wait, from a track holding
-        ``report_backfill_min_points`` returns (deviation 98)."""
+        if the run ended sooner or the frame is more than ``report_backfill`` past due.
+        A run that ended sooner still has its frames estimated, within that wait, from a
+        track holding ``report_backfill_min_points`` returns (deviation 98). ``until``
+        inf (flush, reset): every frame is decided, a run still going taken as ended
+        there."""
         p = self.params
         held = self._held
         tracks: list[_TrackPiece] | None = None
+        final = math.isinf(until)
         while held:
             stamp, estimate, new_run = held[0]
             if estimate is None:
                 run = self._live_run(stamp, p.link_max_gap if new_run else None)
                 lasted = run is not None and run[1] - run[0] >= self._run_needed(stamp, run)
-                going = run is not None and run[2]
-                waited = stamp <= until - p.report_backfill or len(held) > _MAX_LAGGED
+                going = run is not None and run[2] and not final
+                past_due = not final and stamp <= until - p.report_backfill
+                waited = past_due or len(held) > _MAX_LAGGED
                 if not lasted and going and not waited:
                     return
                 # Deviation 98: a run cut short still backfills from a well-observed track.

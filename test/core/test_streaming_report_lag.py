@@ -672,6 +672,21 @@ def test_frames_before_a_new_live_run_wait_until_it_has_lasted(scene):
             assert at >= first_live + min(first_live - e.stamp, 2.0) - 0.11
 
 
+def test_at_the_end_of_a_stream_a_run_still_going_has_ended(scene):
+    # The stream stops 1 s into the drone's first live run. flush() takes the run as
+    # ended there: the frames before it are estimated from a track with
+    # report_backfill_min_points returns (deviation 98), as after a run cut short
+    # mid-stream; with that exception off only those the 1 s run covers (deviation 107).
+    frames, _, _ = scene(duration=10.0, wall_points=200, drone_points=3)
+    first_live = min(e.stamp for e in run_streaming(frames))
+    cut = [f for f in frames if f.stamp <= first_live + 1.0]
+    kept = run_streaming(cut, detector_params({"report_lag": LAG}))
+    assert min(e.stamp for e in kept) < first_live - LAG - 0.5
+    strict = {"report_lag": LAG, "report_backfill_min_points": 0}
+    covered = run_streaming(cut, detector_params(strict))
+    assert first_live - 1.15 <= min(e.stamp for e in covered) <= first_live - 0.85
+
+
 def test_before_new_run_only_for_a_run_after_a_silence():
     det = StreamingDetector(detector_params({"report_lag": 3.0}))
     assert det.params.link_max_gap == 2.0 and det.params.report_backfill_min_run == 2.0
