@@ -834,7 +834,7 @@ def local_scatter(
         rows = np.flatnonzero(width == w)
         window = p[lo[rows, None] + np.arange(w)]
         dist[rows] = np.linalg.norm(p[rows] - np.median(window, axis=1), axis=1)
-    return group_quantiles(g, dist, k, (0.5,))[0]
+    return group_quantile(g, dist, k, 0.5)
 
 
 def group_quantiles(

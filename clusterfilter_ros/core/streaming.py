@@ -1302,12 +1302,13 @@ class StreamingDetector:
         p = self.params
         if not p.report_hold_new_runs or p.report_backfill <= 0 or p.report_backfill_min_run <= 0:
             return False
-        run = self._live_run(stamp, p.link_max_gap)
-        if run is None or run[0] <= stamp or run[1] - run[0] >= self._run_needed(stamp, run):
-            return False
+        # The cheap test first: most frames due have a live estimate just before them.
         reports = self._live_reports
         i = bisect.bisect_left(reports, stamp, key=lambda r: r[0])
-        return i == 0 or stamp - reports[i - 1][0] > p.link_max_gap
+        if i > 0 and stamp - reports[i - 1][0] <= p.link_max_gap:
+            return False
+        run = self._live_run(stamp, p.link_max_gap)
+        return run is not None and run[0] > stamp and run[1] - run[0] < self._run_needed(stamp, run)
 
     def _run_needed(self, stamp: float, run: tuple[float, float, bool]) -> float:
         """How long the live run ``run`` (of :meth:`_live_run`) after the frame at
