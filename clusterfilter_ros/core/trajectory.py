@@ -260,9 +260,12 @@ def _fit(
     else:
         ts_used, ws_used = ts, ws
     segments = []
+    # A mean of equal confidences can round below them (0.6 -> 0.5999999999999999), and
+    # a piece given exactly min_confidence would then not be reported: clip to the inputs.
+    lowest, highest = float(conf_pts.min()), float(conf_pts.max())
     for g, idx in enumerate(groups):
         st, sp, sw, sc = ts[idx], ps[idx], ws[idx], cs[idx]
-        conf = float(np.average(sc, weights=sw))
+        conf = min(max(float(np.average(sc, weights=sw)), lowest), highest)
         if context_gap > 0 and st.size < 5:
             # A short piece of a longer track: its line also goes through the nearest
             # context_window of the neighbouring pieces (same object, within context_gap),

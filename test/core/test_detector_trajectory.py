@@ -219,3 +219,18 @@ def test_weighted_quadratic_recovers_a_parabola_whatever_the_weights():
     light = weighted_quadratic(dt, noisy, np.ones(9))
     heavy = weighted_quadratic(dt, noisy, np.where(np.arange(9) == 4, 100.0, 1.0))
     assert heavy[0, 0] - coef_true[0, 0] > light[0, 0] - coef_true[0, 0] > 0
+
+
+@pytest.mark.parametrize("n_samples", [10, 20, 80, 110])
+def test_a_constant_confidence_is_kept_exactly(n_samples):
+    # The mean of n copies of 0.6 is 0.5999999999999999 for these n: a piece given
+    # exactly min_confidence (offline, deviation 80) was then never reported.
+    t = np.arange(n_samples) * 0.05
+    xyz = np.column_stack([2.0 * t, np.zeros_like(t), np.full_like(t, 30.0)])
+    assert float(np.average(np.full(n_samples, 0.6), weights=np.ones(n_samples))) < 0.6
+    traj = fit_trajectory(
+        t, xyz, max_gap=1.0, max_extrapolation=0.3, confidence=np.full(n_samples, 0.6)
+    )
+    assert traj is not None
+    assert all(seg.confidence == 0.6 for seg in traj.segments)
+    assert (traj.confidence(t) >= 0.6).all()
