@@ -1362,9 +1362,12 @@ class StreamingDetector:
             )
             if p.report_keep_newer:
                 # Kept pieces newer than the current track (deviation 105) come after it,
-                # as their own chains, which the current one may continue.
-                newer = [pc for pc in pieces if pc.ts[0] > current.ts[-1]]
-                pieces = [pc for pc in pieces if pc.ts[0] <= current.ts[-1]]
+                # as their own chains, which the current one may continue. Newer: reaching
+                # past its newest sample. A piece that begins at or before it (a grown tail
+                # can take the very return the piece begins with) is no older: among the
+                # older pieces it was dropped, as one the current track reaches back over.
+                newer = [pc for pc in pieces if pc.ts[-1] > current.ts[-1]]
+                pieces = [pc for pc in pieces if pc.ts[-1] <= current.ts[-1]]
                 pieces += [current, *newer]
             else:
                 pieces.append(current)

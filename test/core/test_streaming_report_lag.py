@@ -533,6 +533,20 @@ def test_a_reported_tracks_newer_returns_stay_when_an_older_cluster_is_chosen():
         assert max(c.ts[-1] for c in late_tracks(keep, report_t)) < 2.1
 
 
+def test_a_kept_newer_piece_that_begins_at_the_tracks_newest_sample_is_not_dropped():
+    # Flyover 4805 of the forty-seventh set: the current track's grown tail took the very
+    # return the kept newer piece (deviation 105) begins with. Counted among the older
+    # pieces, the piece was then dropped as one the current track reaches back over, and
+    # the late output lost the frames up to its newest live estimate (4.5 s here).
+    newer_t = np.arange(2.0, 4.85, 0.1)
+    newer = dataclasses.replace(_piece(newer_t, _line(newer_t), conf=0.8), reported_until=4.5)
+    det = _detector_with([newer], np.arange(0.0, 2.05, 0.1))
+    assert det._track[-1].t == newer_t[0]
+    chains = det._delayed_tracks()
+    assert chains[0].ts[-1] > 4.7 and abs(chains[0].reported_until - 4.5) < 1e-9
+    assert chains[0].ts[0] < 0.1  # the current track continues into it: one chain
+
+
 # --------------------------------------------------------------- smoothed_position
 
 P = detector_params()  # max_gap 1 s, max_extrapolation 0.5 s, track_window 1 s
