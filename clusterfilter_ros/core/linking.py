@@ -524,8 +524,12 @@ def extend_track(
             else:
                 pred = pos + dt[:, None] * vel
                 reach = linking_reach(adt, params)
-                if slow and span > gap:  # a hovering end: beyond the usual gap, where it was
-                    reach = np.where(adt > gap, params.track_gate, reach)
+                if slow:
+                    # A hovering end: beyond max_gap, where it was. A return taken farther
+                    # back becomes a segment of its own, reported where it lies; within the
+                    # full linking reach that was a passing bird's (hover 4801, 47th set).
+                    far = adt > min(gap, float(params.max_gap))
+                    reach = np.where(far, np.minimum(reach, params.track_gate), reach)
             pts = xyz[pool_idx[cand]]
             ok = np.linalg.norm(pts - pred, axis=1) <= reach
             if vel is not None:

@@ -666,6 +666,18 @@ def test_extend_track_hover_pause_takes_only_returns_on_the_spot_within_the_gap(
     assert not extend_track(member, xyz, t, ~member, detector_params())[~member].any()
 
 
+@pytest.mark.parametrize(("offset", "taken"), [(3.0, False), (1.5, True)])
+def test_a_hovering_end_takes_a_return_past_max_gap_only_on_the_spot(offset, taken):
+    # Hover 4801 of the forty-seventh set: a bird's lone return 3.0 m from a drone
+    # hovering 30 m out, 1.15 s before the drone's first return. Within the pause
+    # extend_max_gap allows (1.5 s) the linking reach was 4.1 m. But a return taken more
+    # than max_gap (1 s) back becomes a segment of its own, reported where it lies. So a
+    # hovering end now takes it only within track_gate (2 m), as across a longer pause.
+    xyz, t = _hover_with_a_pause([(15.27 - 1.15, offset)])
+    member = t > 15.0
+    assert extend_track(member, xyz, t, ~member, detector_params())[~member].all() == taken
+
+
 def _pass_with_a_lone_return(direction: np.ndarray, lone_behind: float = 7.7):
     """A drone passing at 11 m/s along ``direction`` from 25 m out along a fixed line
     of sight, two returns a frame for 1 s, then one return 2.7 s after the last frame,
