@@ -461,7 +461,8 @@ def extend_track(
     ``link_max_accel``, up to ``extend_max_brake`` (:func:`_braking_offsets`), joins it
     too: a drone stopping into a hover (backwards in time: speeding away from one). An
     end slower than ``min_speed`` (hovering) also takes, across gaps longer than that up
-    to ``extend_hover_gap``, the returns within ``track_gate`` of where it was heading.
+    to ``extend_hover_gap``, the returns within ``track_gate`` of where it was heading;
+    across gaps longer than ``max_gap`` it takes only those (deviation 109).
     An end leaving the lidars (:func:`_leaving`: a pass whose returns thin out with
     range) takes, across gaps up to ``extend_far_gap``, a lone return near its line
     farther out (:func:`_near_line`) at a spot that returned nothing else a second

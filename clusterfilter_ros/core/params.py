@@ -624,7 +624,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "Offline: a selected track's end slower than min_speed (a hovering drone seen once "
         "every second or two) grows across gaps up to this (s) by returns within "
         "track_gate of where it was heading (as streaming re-acquires a slow track within "
-        "reacquire_window); at or below extend_max_gap, as any end.",
+        "reacquire_window); at or below extend_max_gap as any end, but past max_gap also "
+        "only within track_gate.",
         minimum=0.0,
         maximum=60.0,
     ),
