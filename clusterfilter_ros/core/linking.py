@@ -526,11 +526,13 @@ def extend_track(
                 pred = pos + dt[:, None] * vel
                 reach = linking_reach(adt, params)
                 if slow:
-                    # A hovering end: beyond max_gap, where it was. A return taken farther
-                    # back becomes a segment of its own, reported where it lies; within the
-                    # full linking reach that was a passing bird's (hover 4801, 47th set).
-                    far = adt > min(gap, float(params.max_gap))
-                    reach = np.where(far, np.minimum(reach, params.track_gate), reach)
+                    # A hovering end: beyond the usual gap (a hover's pause), where it was.
+                    # Past max_gap within it, at most that far: a return taken there becomes
+                    # a segment of its own, reported where it lies; within the full linking
+                    # reach it was a passing bird's (deviation 109, hover 4801, 47th set).
+                    gate = params.track_gate
+                    capped = np.where(adt > params.max_gap, np.minimum(reach, gate), reach)
+                    reach = np.where(adt > gap, gate, capped)
             pts = xyz[pool_idx[cand]]
             ok = np.linalg.norm(pts - pred, axis=1) <= reach
             if vel is not None:
