@@ -1297,6 +1297,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "a frame is estimated when due while the run is going.",
     ),
     ParamSpec(
+        "report_next_run",
+        "bool",
+        True,
+        "report_lag: a held frame (backfilled, or before a new live run) whose live run "
+        "ended too soon, and was not kept by report_backfill_min_points, waits for the "
+        "next live run instead of being dropped: estimated once that run has lasted "
+        "report_backfill_min_run, within the same report_backfill wait, from a track the "
+        "live output reported in that run or one such a track could continue: the short "
+        "run's object counts as confirmed only if the next run could be the same object. "
+        "A drone the live output held for a moment before a pause is no reason to give up "
+        "the frames before it. false = dropped when the run ends.",
+    ),
+    ParamSpec(
         "report_bridge",
         "bool",
         True,

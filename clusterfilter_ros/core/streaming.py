@@ -100,6 +100,19 @@ class _Chunk:
 
 
 @dataclass
+class _HeldFrame:
+    """A frame held for the late output (report_backfill), or an estimate held behind
+    one so that the output stays in stamp order."""
+
+    stamp: float
+    estimate: Estimate | None = None
+    decided: bool = False  # the estimate (None: dropped) is final
+    new_run: bool = False  # before a new live run (report_hold_new_runs, deviation 107)
+    # report_next_run: the live run it waits for begins after this stamp (deviation 110).
+    after: float = -math.inf
+
+
+@dataclass
 class _TrackSample:
     t: float
     position: np.ndarray  # (3,) float64 mean of the frame's drone points
@@ -393,11 +406,9 @@ class StreamingDetector:
         self._lagged: deque[float] = deque()
         self._ready: deque[Estimate] = deque(maxlen=_MAX_LAGGED)
         # report_backfill: in stamp order, frames released while a new track's live run
-        # was still too short to backfill (stamp, None, new_run) and the estimates made
-        # after them (stamp, estimate, False), held so that the output stays in stamp
-        # order; new_run: a frame before a new live run (report_hold_new_runs), whose
-        # run may pause for up to link_max_gap.
-        self._held: deque[tuple[float, Estimate | None, bool]] = deque()
+        # was still too short to backfill, each decided on its own, and the estimates
+        # made after them, held so that the output stays in stamp order.
+        self._held: deque[_HeldFrame] = deque()
         self.delayed_dropped = 0
         self.reset()
 
@@ -1168,10 +1179,10 @@ class StreamingDetector:
                 if self._last_live < stamp:
                     continue
                 if stamp <= self._unreported_until:
-                    self._held.append((stamp, None, False))  # backfilled: resolved below
+                    self._held.append(_HeldFrame(stamp))  # backfilled: resolved below
                     continue
                 if self._before_new_run(stamp):
-                    self._held.append((stamp, None, True))  # deviation 107: as backfilled
+                    self._held.append(_HeldFrame(stamp, new_run=True))  # deviation 107
                     continue
                 shortest = p.report_lag_min_run
                 if shortest > 0 and self._live_run_seconds(stamp) < shortest:
@@ -1186,52 +1197,89 @@ class StreamingDetector:
         self._resolve_held(until)
 
     def _resolve_held(self, until: float) -> None:
-        """Emit the held frames in order while the first backfilled one among them is
-        decided: estimated once its live run (:meth:`_live_run`; for a frame before a new
-        run, with pauses up to ``link_max_gap``) has lasted :meth:`_run_needed`, dropped
-        if the run ended sooner or the frame is more than ``report_backfill`` past due.
-        A run that ended sooner still has its frames estimated, within that wait, from a
-        track holding ``report_backfill_min_points`` returns (deviation 98). ``until``
-        inf (flush, reset): every frame is decided, a run still going taken as ended
-        there."""
-        p = self.params
+        """Decide each undecided held frame, on its own, and emit the held frames in
+        order up to the first still undecided. A backfilled frame is estimated once its
+        live run (:meth:`_live_run`; for a frame before a new run, with pauses up to
+        ``link_max_gap``) has lasted :meth:`_run_needed`, dropped if the run ended
+        sooner or the frame is more than ``report_backfill`` past due. A run that ended
+        sooner still has its frames estimated, within that wait, from a track holding
+        ``report_backfill_min_points`` returns (deviation 98). A frame is decided when
+        its own run allows, from the tracks at that moment, whether or not the frames
+        before it are (deviation 110). ``until`` inf (flush, reset): every frame is
+        decided, a run still going taken as ended there."""
         held = self._held
         tracks: list[_TrackPiece] | None = None
-        final = math.isinf(until)
-        while held:
-            stamp, estimate, new_run = held[0]
-            if estimate is None:
-                run = self._live_run(stamp, p.link_max_gap if new_run else None)
-                lasted = run is not None and run[1] - run[0] >= self._run_needed(stamp, run)
-                going = run is not None and run[2] and not final
-                past_due = not final and stamp <= until - p.report_backfill
-                waited = past_due or len(held) > _MAX_LAGGED
-                if not lasted and going and not waited:
-                    return
-                # Deviation 98: a run cut short still backfills from a well-observed track.
-                short = run is not None and not going and not waited
-                if lasted or (short and p.report_backfill_min_points > 0):
-                    if tracks is None:
-                        tracks = self._delayed_tracks()
-                    least = 0 if lasted else p.report_backfill_min_points
-                    estimate = self._tracks_estimate(stamp, tracks, least)
-            held.popleft()
+        forced = len(held) - _MAX_LAGGED  # the oldest beyond _MAX_LAGGED: decided now
+        for index, frame in enumerate(held):
+            if frame.decided:
+                continue
+            tracks = self._decide_held(frame, until, index < forced, tracks)
+        while held and held[0].decided:
+            estimate = held.popleft().estimate
             if estimate is not None:
                 self._emit(estimate)
+
+    def _decide_held(
+        self,
+        frame: _HeldFrame,
+        until: float,
+        forced: bool,
+        tracks: list[_TrackPiece] | None,
+    ) -> list[_TrackPiece] | None:
+        """Decide ``frame`` (of :meth:`_resolve_held`) if its live run allows; returns
+        the delayed tracks, built here if needed (``tracks`` None: not yet)."""
+        p = self.params
+        final = math.isinf(until)
+        stamp = frame.stamp
+        past_due = not final and stamp <= until - p.report_backfill
+        waited = past_due or forced
+        while True:
+            waits_next = frame.after > stamp  # deviation 110: for a run after a short one
+            run = self._live_run(max(stamp, frame.after), p.link_max_gap if frame.new_run else None)
+            if run is None and waits_next and not waited and not final:
+                return tracks  # no live run since the short one yet
+            lasted = run is not None and run[1] - run[0] >= self._run_needed(stamp, run)
+            going = run is not None and run[2] and not final
+            if not lasted and going and not waited:
+                return tracks
+            # Deviation 98: a run cut short still backfills from a well-observed track.
+            short = run is not None and not going and not waited
+            if lasted or (short and p.report_backfill_min_points > 0):
+                if tracks is None:
+                    tracks = self._delayed_tracks()
+                least = 0 if lasted else p.report_backfill_min_points
+                # After a short run, only from a track of the run waited for, or one
+                # such a track could continue (deviation 110).
+                since = run[0] if waits_next and run is not None else -math.inf
+                frame.estimate = self._tracks_estimate(stamp, tracks, least, since)
+            if frame.estimate is None and short and not lasted and p.report_next_run:
+                # Deviation 110: the run ended too soon; wait for the next one.
+                assert run is not None
+                frame.after = run[1] + 1e-6
+                continue
+            frame.decided = True
+            return tracks
 
     def _tracks_estimate(
         self,
         stamp: float,
         tracks: list[_TrackPiece],
         min_returns: int = 0,
+        reported_since: float = -math.inf,
         bridged: bool = False,
     ) -> Estimate | None:
         """The delayed estimate at ``stamp`` from the first of ``tracks`` (of
         :meth:`_delayed_tracks`) that reaches it and supports one; only from a track
-        holding at least ``min_returns`` returns, and with ``bridged`` only from one the
-        live output reported on both sides of ``stamp`` (:meth:`_bridges`)."""
+        holding at least ``min_returns`` returns, reported live at or after
+        ``reported_since`` or continued by such a track (:meth:`_continued_in`), and with
+        ``bridged`` only from one the live output reported on both sides of ``stamp``
+        (:meth:`_bridges`)."""
         for track in tracks:
             if stamp > max(track.reported_until, track.extends_until):
+                continue
+            if track.reported_until < reported_since and not self._continued_in(
+                track, tracks, reported_since
+            ):
                 continue
             if min_returns and track.ws.sum() < min_returns:
                 continue
@@ -1241,6 +1289,18 @@ class StreamingDetector:
             if estimate is not None:
                 return estimate
         return None
+
+    def _continued_in(self, track: _TrackPiece, tracks: list[_TrackPiece], since: float) -> bool:
+        """Whether one of ``tracks`` the live output reported at or after ``since``
+        begins after ``track`` ends and could continue it (:func:`_could_continue`): a
+        short live run's object is taken as confirmed by the next run only if that run
+        could be the same object (deviation 110)."""
+        return any(
+            later.reported_until >= since
+            and later.ts[0] > track.ts[-1]
+            and _could_continue(track, later, self.params)
+            for later in tracks
+        )
 
     def _bridges(self, stamp: float, track: _TrackPiece) -> bool:
         """report_bridge: whether push() reported positions on ``track``
@@ -1258,7 +1318,7 @@ class StreamingDetector:
     def _emit_in_order(self, estimate: Estimate) -> None:
         """Emit ``estimate``, or hold it behind the held frames before it."""
         if self._held:
-            self._held.append((estimate.stamp, estimate, False))
+            self._held.append(_HeldFrame(estimate.stamp, estimate, decided=True))
         else:
             self._emit(estimate)
 

@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 
 from clusterfilter_ros.core import streaming
+from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.streaming import StreamingDetector, run_streaming, smoothed_position
@@ -953,6 +954,76 @@ def test_a_short_live_run_is_backfilled_from_a_track_with_many_returns(scene, dr
     strict = {**values, "report_backfill_min_points": 1000}
     dropped = run_streaming(frames, detector_params(strict))
     assert dropped and min(e.stamp for e in dropped) >= first_live - LAG - 0.15
+
+
+def test_frames_whose_live_run_ended_too_soon_wait_for_the_next_run(scene, drone_path_fn):
+    # Deviation 110: the drone's returns pause for 2 s, 1 s after its confirmation at the
+    # end of the warm-up. The live output holds it for about 1.5 s, pauses, then holds it
+    # to the end. The frames before the confirmation waited for that first run to last
+    # report_backfill_min_run and were dropped when it ended; with report_next_run they
+    # wait for the next run instead, within report_backfill, and are reported from the
+    # drone's track.
+    frames, _, _ = scene(duration=16.0, wall_points=200, drone_points=3)
+    first_live = min(e.stamp for e in run_streaming(frames))
+    frames = [
+        Frame(f.stamp, f.sensor, f.xyz[:-3])
+        if first_live + 1.0 < f.stamp <= first_live + 3.0
+        else f
+        for f in frames
+    ]
+    live = np.array([e.stamp for e in run_streaming(frames)])
+    pause = np.diff(live).max()
+    assert 1.5 <= pause <= 2.5 and live[np.argmax(np.diff(live))] - first_live < 2.0
+    values = {"report_lag": LAG, "report_backfill_min_points": 0}
+    late = run_streaming(frames, detector_params(values))
+    stamps = np.array([e.stamp for e in late])
+    assert np.all(np.diff(stamps) > 0)
+    assert stamps.min() < 1000.2  # the stream's first frames
+    pos = np.array([e.position for e in late])
+    err = np.linalg.norm(pos - drone_path_fn(stamps - 1000.0), axis=1)
+    assert np.sqrt(np.mean(err**2)) < 0.3
+    dropped = run_streaming(frames, detector_params({**values, "report_next_run": False}))
+    assert min(e.stamp for e in dropped) > 1000.9
+
+
+def test_a_frame_is_decided_when_its_own_run_allows_whatever_the_frames_before_it():
+    # Deviation 110: a held frame waiting for the next live run does not hold back the
+    # decision of the frames behind it, only their emission: each is decided from the
+    # tracks when its own run has lasted, and all come out in stamp order.
+    det = StreamingDetector(detector_params({"report_lag": LAG}))
+    decided: list[float] = []
+
+    def decide(frame, until, forced, tracks):
+        if frame.stamp > 1.0:
+            frame.decided = True
+            frame.estimate = Estimate(frame.stamp, np.zeros(3), 1.0, 10)
+            decided.append(frame.stamp)
+        return tracks
+
+    det._decide_held = decide  # type: ignore[method-assign]
+    det._held.extend(streaming._HeldFrame(s) for s in (1.0, 2.0, 3.0))
+    det._resolve_held(10.0)
+    assert decided == [2.0, 3.0] and det.delayed() == []
+    det._held[0].decided = True
+    det._resolve_held(10.0)
+    assert [e.stamp for e in det.delayed()] == [2.0, 3.0] and not det._held
+
+
+def test_after_a_short_run_only_an_object_the_next_run_could_be_is_taken():
+    # Deviation 110: a frame that waited past a short live run for the next one is
+    # estimated from the short run's track only if a track of the next run could continue
+    # it; another object reported in the next run does not confirm it.
+    det = StreamingDetector(P)
+    ts = np.arange(0.0, 2.0, 0.1)
+    short = dataclasses.replace(_piece(ts, _line(ts)), reported_until=1.9)
+    later = np.arange(3.5, 6.0, 0.1)
+    same = dataclasses.replace(_piece(later, _line(later)), reported_until=5.9)
+    other = dataclasses.replace(same, ps=_line(later) + [0.0, 30.0, 0.0])
+    assert det._continued_in(short, [short, same], since=3.5)
+    assert not det._continued_in(short, [short, other], since=3.5)
+    assert det._tracks_estimate(1.0, [short, same], reported_since=3.5) is not None
+    assert det._tracks_estimate(1.0, [short, other], reported_since=3.5) is None
+    assert det._tracks_estimate(1.0, [short, other]) is not None  # no run waited for
 
 
 def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
