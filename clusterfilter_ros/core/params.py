@@ -737,6 +737,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1000.0,
     ),
     ParamSpec(
+        "stream_split_track",
+        "bool",
+        True,
+        "Streaming (needs split_merged): when the cluster holding the reported track's "
+        "recent returns fails keep_confidence, it is split into kinematic tracks; the one "
+        "holding the recent returns near the track's predicted position continues the "
+        "track if it also holds those near its newest sample, begins with the track "
+        "(within track_window) and alone passes keep_confidence: another object that "
+        "joined the drone's cluster without making it wide or rough enough to be split "
+        "as merged. false = the track is given up.",
+    ),
+    ParamSpec(
         "split_blob",
         "float",
         1.0,

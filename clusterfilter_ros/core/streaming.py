@@ -66,7 +66,7 @@ from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters, structure_contact
-from clusterfilter_ros.core.splitting import split_and_score
+from clusterfilter_ros.core.splitting import kinematic_tracks, split_and_score
 from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
 
 #: Frames waiting for their report_lag estimate beyond this are estimated at once (a
@@ -343,6 +343,8 @@ class _HistorySnapshot:
     # (time, position) of the reported track's newest sample, with ``expected``
     newest: tuple[float, np.ndarray] | None
     params: ParamSet
+    # Time of the reported track's oldest sample, with ``expected``.
+    track_from: float | None = None
 
 
 @dataclass(frozen=True)
@@ -728,6 +730,7 @@ class StreamingDetector:
             if expected is None or self._last_reported is None
             else (self._last_reported[0], self._last_reported[1]),
             params=p,
+            track_from=None if expected is None or not self._track else self._track[0].t,
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
         if self.background:
@@ -1652,6 +1655,11 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         return choice(None, 0.0, False, k, coast=True)
     if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
         return choice(labels == c, float(p.min_confidence), False, k)
+    if p.split_merged and p.stream_split_track:
+        # The reported track's cluster fails: another object may have joined it.
+        mask = _split_track(c, labels, xyz, t, snap, scorer, ps)
+        if mask is not None:
+            return choice(mask, float(p.min_confidence), False, k)
     if p.hover_detection and p.hover_keep_frames < p.hover_min_frames:
         # A hovering drone 10-20 m away leaves about as many frames in the history as
         # hover_min_frames asks: once reported, fewer suffice.
@@ -1888,6 +1896,52 @@ def _track_cluster(
     if not near.any():
         return None
     return int(np.bincount(labels[near]).argmax())
+
+
+def _split_track(
+    c: int,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    snap: _HistorySnapshot,
+    scorer: Any,
+    params: ParamSet,
+) -> np.ndarray | None:
+    """Points of the kinematic track (:func:`~.splitting.kinematic_tracks`) of cluster
+    ``c`` that continues the reported track (``snap``): it holds most of the cluster's
+    returns of the last ``track_window`` near the track's expected position, and most of
+    those near its newest sample in the ``track_window`` before that, begins within
+    ``track_window`` of its oldest sample, and alone is a candidate with
+    ``keep_confidence``. For a reported drone's cluster that another object joined,
+    too narrow and smooth for the split of merged clusters (deviation 111); else None."""
+    if snap.expected is None or snap.newest is None or snap.track_from is None:
+        return None
+    member = np.flatnonzero(labels == c)
+    pieces = kinematic_tracks(xyz[member], t[member], params)
+    n = int(pieces.max()) + 1 if pieces.size else 0
+    if n < 2:
+        return None
+    predicted, gate = snap.expected
+    window = params.track_window
+    piece = _track_cluster(predicted, gate, pieces, xyz[member], t[member], snap.now - window)
+    if piece is None:
+        return None
+    # The piece must be the track's continuation, not another object that came near where
+    # it was heading: it holds the track's newest returns and reaches back to its oldest
+    # (or to the cluster's first, if the history holds less).
+    t_last, position = snap.newest
+    tm = t[member]
+    own = _track_cluster(
+        position, params.track_gate, pieces, xyz[member], tm, t_last - window, t_last
+    )
+    if own != piece or tm[pieces == piece].min() > max(snap.track_from, tm.min()) + window:
+        return None
+    scores = scorer(pieces, xyz[member], t[member], params, n_clusters=n)
+    if not (scores.candidate[piece] and scores.confidence[piece] >= params.keep_confidence):
+        return None
+    mask = np.zeros(labels.size, dtype=bool)
+    mask[member[pieces == piece]] = True
+    return mask
 
 
 def _hovering_track(

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import functools
 import threading
+import types
 
 import numpy as np
 import pytest
@@ -11,9 +13,11 @@ from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.estimate import Estimate
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.params import detector_params
+from clusterfilter_ros.core.scoring import score_clusters
 from clusterfilter_ros.core.streaming import (
     StreamingDetector,
     _joined_track,
+    _split_track,
     _track_samples,
     run_streaming,
 )
@@ -960,3 +964,52 @@ def test_a_failed_background_reclustering_is_raised_by_the_next_push(scene, monk
     det.finish_recluster(timeout=30.0)
     assert det.stats()["reclusters"] >= 1.0
     det.close()
+
+
+def test_a_reported_tracks_cluster_joined_by_a_bird_keeps_the_drones_piece():
+    # Deviation 111: a drone crossing at 4 m/s (3 returns a frame) and, for its last
+    # 1.5 s, a bird 3 m off at 12 m/s (20 returns a frame, near the Avia) in one cluster
+    # too narrow and smooth to be split as merged. The whole fails keep_confidence; the
+    # kinematic track near the drone's predicted position is the drone's returns alone.
+    p = detector_params()
+    ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
+    rng = np.random.default_rng(1)
+    stamps = np.arange(0.0, 6.0, 0.1)
+    drone = np.stack(
+        [-12.0 + 4.0 * stamps, np.full_like(stamps, 30.0), np.full_like(stamps, 25.0)], 1
+    )
+    late = stamps[stamps >= 4.5]
+    bird = np.stack(
+        [8.0 - 12.0 * (late - 4.5), np.full_like(late, 33.0), np.full_like(late, 25.0)], 1
+    )
+    xyz = np.concatenate([np.repeat(drone, 3, 0), np.repeat(bird, 20, 0)])
+    xyz += rng.normal(0, 0.1, xyz.shape)
+    t = np.concatenate([np.repeat(stamps, 3), np.repeat(late, 20)])
+    is_drone = np.arange(t.size) < 3 * stamps.size
+    labels = np.zeros(t.size, np.int64)
+    scorer = functools.partial(
+        score_clusters, t0=0.0, coherence_origin=0.0, min_track_seconds=p.stream_min_track_seconds
+    )
+    whole = scorer(labels, xyz, t, ps, n_clusters=1)
+    assert whole.confidence[0] < p.keep_confidence
+    snap = types.SimpleNamespace(
+        expected=(drone[-1] + [0.4, 0.0, 0.0], p.track_gate),
+        newest=(5.9, drone[-1]),
+        now=6.0,
+        track_from=0.0,
+    )
+    mask = _split_track(0, labels, xyz, t, snap, scorer, ps)
+    assert mask is not None and np.array_equal(mask, is_drone)
+    # The drone alone is one kinematic track: nothing to split.
+    assert _split_track(0, labels[is_drone], xyz[is_drone], t[is_drone], snap, scorer, ps) is None
+    # Not the track's continuation: the bird's piece near the expected position while the
+    # track's newest returns are the drone's, or a piece beginning long after the track.
+    at_bird = types.SimpleNamespace(**{**vars(snap), "expected": (bird[-1], p.track_gate)})
+    assert _split_track(0, labels, xyz, t, at_bird, scorer, ps) is None
+    older = types.SimpleNamespace(**{**vars(snap), "track_from": -5.0})
+    assert _split_track(0, labels, xyz, t, older, scorer, ps) is not None  # history holds less
+    # The track's first 3 s a separate kinematic track of the same cluster (here 6 m
+    # off): the piece near the expected position begins 3 s after the track did.
+    moved = xyz + np.where((t < 3.0) & is_drone, 6.0, 0.0)[:, None] * [0.0, 1.0, 0.0]
+    assert _split_track(0, labels, moved, t, snap, scorer, ps) is None
+    assert _split_track(0, labels, moved, t, older, scorer, ps) is None
