@@ -1319,7 +1319,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "live output reported in that run or one such a track could continue: the short "
         "run's object counts as confirmed only if the next run could be the same object. "
         "A drone the live output held for a moment before a pause is no reason to give up "
-        "the frames before it. false = dropped when the run ends.",
+        "the frames before it. So does a frame that, when due, only a replaced track's "
+        "newer returns reached (held live too briefly for report_keep_newer): it waits "
+        "for the live run after the one that reported them. false = dropped.",
     ),
     ParamSpec(
         "report_bridge",

@@ -456,6 +456,10 @@ class StreamingDetector:
         # report_lag: earlier pieces of reported tracks, for the frames waiting for their
         # delayed estimate that the current track no longer reaches (oldest first).
         self._archive: deque[_TrackPiece] = deque(maxlen=_MAX_ARCHIVED)
+        # report_next_run: (first sample time, newest live report) of newer returns that
+        # report_keep_newer did not keep (held live too briefly): a frame they reached
+        # waits for the next live run instead of being dropped (deviation 112).
+        self._unkept: deque[tuple[float, float]] = deque(maxlen=_MAX_ARCHIVED)
         # report_lag: (stamp, position) of push()'s recent estimates, to tell which kept
         # piece the live output reported.
         self._live_reports: deque[tuple[float, np.ndarray]] = deque(maxlen=_MAX_LAGGED)
@@ -859,9 +863,11 @@ class StreamingDetector:
         if not newer:
             return
         piece = _TrackPiece(*_sample_arrays(newer), confidence)
+        until = self._reported_until(piece)
         if self._survives_drop(piece, now):
-            until = self._reported_until(piece)
             self._archive.append(dataclasses.replace(piece, reported_until=until))
+        elif until > -math.inf:
+            self._unkept.append((float(piece.ts[0]), until))
 
     def _survives_drop(self, piece: _TrackPiece, now: float) -> bool:
         """Whether a reported track's samples ``piece``, no longer the track after the
@@ -909,6 +915,8 @@ class StreamingDetector:
         horizon = self._now - p.report_lag - p.report_backfill - reach
         while self._archive and self._archive[0].ts[-1] < horizon:
             self._archive.popleft()
+        while self._unkept and self._unkept[0][1] < horizon:
+            self._unkept.popleft()
         # A kept piece spans at most local_history.
         while self._live_reports and self._live_reports[0][0] < horizon - p.local_history:
             self._live_reports.popleft()
@@ -1197,6 +1205,14 @@ class StreamingDetector:
             estimate = self._tracks_estimate(stamp, tracks, bridged=bridged)
             if estimate is not None:
                 self._emit_in_order(estimate)
+            elif not on_tail and p.report_next_run:
+                # Deviation 112: returns not kept reached this frame; it waits for the
+                # live run after the one that reported them, as a frame whose run ended
+                # too soon does.
+                reported = max((u for t0, u in self._unkept if t0 <= stamp <= u), default=None)
+                run = None if reported is None else self._live_run(reported)
+                if run is not None:
+                    self._held.append(_HeldFrame(stamp, after=run[1] + 1e-6))
         self._resolve_held(until)
 
     def _resolve_held(self, until: float) -> None:

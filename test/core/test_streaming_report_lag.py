@@ -7,6 +7,7 @@ import dataclasses
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core import streaming
 from clusterfilter_ros.core.estimate import Estimate
@@ -1024,6 +1025,26 @@ def test_after_a_short_run_only_an_object_the_next_run_could_be_is_taken():
     assert det._tracks_estimate(1.0, [short, same], reported_since=3.5) is not None
     assert det._tracks_estimate(1.0, [short, other], reported_since=3.5) is None
     assert det._tracks_estimate(1.0, [short, other]) is not None  # no run waited for
+
+
+@pytest.mark.parametrize("next_run", [True, False])
+def test_a_frame_reached_only_by_newer_returns_not_kept_waits_for_the_next_run(next_run):
+    # Deviation 112: report_keep_newer did not keep a replaced track's newer returns (held
+    # live too briefly). A frame they reached, with no track left for it when due, waits
+    # for the next live run instead of being dropped.
+    det = StreamingDetector(detector_params({"report_lag": LAG, "report_next_run": next_run}))
+    det._now = 12.0 + LAG
+    for stamp in np.arange(9.5, 12.05, 0.1):
+        det._live_reports.append((float(stamp), np.zeros(3)))
+    det._last_live = det._live_reports[-1][0]
+    det._unkept.append((9.0, 11.0))
+    det._lagged.extend([8.5, 10.0])
+    det._release_delayed(10.0)
+    if not next_run:
+        assert not det._held
+        return
+    (held,) = det._held  # 8.5 lies before the returns: dropped as before
+    assert held.stamp == 10.0 and not held.decided and held.after > 12.0  # after that run
 
 
 def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
