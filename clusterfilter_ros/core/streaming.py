@@ -1933,26 +1933,24 @@ def _split_track(
     if snap.expected is None or snap.newest is None or snap.track_from is None:
         return None
     member = np.flatnonzero(labels == c)
-    pieces = kinematic_tracks(xyz[member], t[member], params)
+    xm, tm = xyz[member], t[member]
+    pieces = kinematic_tracks(xm, tm, params)
     n = int(pieces.max()) + 1 if pieces.size else 0
     if n < 2:
         return None
     predicted, gate = snap.expected
     window = params.track_window
-    piece = _track_cluster(predicted, gate, pieces, xyz[member], t[member], snap.now - window)
+    piece = _track_cluster(predicted, gate, pieces, xm, tm, snap.now - window)
     if piece is None:
         return None
     # The piece must be the track's continuation, not another object that came near where
     # it was heading: it holds the track's newest returns and reaches back to its oldest
     # (or to the cluster's first, if the history holds less).
     t_last, position = snap.newest
-    tm = t[member]
-    own = _track_cluster(
-        position, params.track_gate, pieces, xyz[member], tm, t_last - window, t_last
-    )
+    own = _track_cluster(position, params.track_gate, pieces, xm, tm, t_last - window, t_last)
     if own != piece or tm[pieces == piece].min() > max(snap.track_from, tm.min()) + window:
         return None
-    scores = scorer(pieces, xyz[member], t[member], params, n_clusters=n)
+    scores = scorer(pieces, xm, tm, params, n_clusters=n)
     if not (scores.candidate[piece] and scores.confidence[piece] >= params.keep_confidence):
         return None
     mask = np.zeros(labels.size, dtype=bool)
