@@ -1212,7 +1212,7 @@ class StreamingDetector:
                 reported = max((u for t0, u in self._unkept if t0 <= stamp <= u), default=None)
                 run = None if reported is None else self._live_run(reported)
                 if run is not None:
-                    self._held.append(_HeldFrame(stamp, after=run[1] + 1e-6))
+                    self._held.append(_HeldFrame(stamp, after=_after_run(run)))
         self._resolve_held(until)
 
     def _resolve_held(self, until: float) -> None:
@@ -1274,7 +1274,7 @@ class StreamingDetector:
             if frame.estimate is None and short and not lasted and p.report_next_run:
                 # Deviation 110: the run ended too soon; wait for the next one.
                 assert run is not None
-                frame.after = run[1] + 1e-6
+                frame.after = _after_run(run)
                 continue
             frame.decided = True
             return tracks
@@ -1728,6 +1728,12 @@ def _track_samples(
                 continue
         samples.append(sample)
     return samples
+
+
+def _after_run(run: tuple[float, float, bool]) -> float:
+    """The stamp from which the live run after ``run`` (of
+    :meth:`StreamingDetector._live_run`) is looked for: just past its last estimate."""
+    return math.nextafter(run[1], math.inf)
 
 
 def _grown(

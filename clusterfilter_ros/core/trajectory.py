@@ -35,14 +35,25 @@ def time_samples(
     """Average points per time bin: (times (S,), positions (S, 3), point counts (S,))."""
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
+    return _bin_means(t, xyz, bin_seconds)
+
+
+def _bin_means(
+    t: np.ndarray, values: np.ndarray, bin_seconds: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`time_samples` for any number of columns: (mean times (S,), mean ``values``
+    per bin (S, C), counts (S,)), ``t`` (N,) and ``values`` (N, C) float64."""
     if t.size == 0:
-        return np.empty(0), np.empty((0, 3)), np.empty(0)
+        return np.empty(0), np.empty((0, values.shape[1])), np.empty(0)
     b = np.floor((t - t.min()) / bin_seconds).astype(np.int64)
     ub, inv, counts = unique_ints(b, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     tm = np.bincount(inv, weights=t) / counts
-    pos = np.stack([np.bincount(inv, weights=xyz[:, a]) / counts for a in range(3)], axis=1)
-    return tm, pos, counts.astype(np.float64)
+    means = np.stack(
+        [np.bincount(inv, weights=values[:, a]) / counts for a in range(values.shape[1])],
+        axis=1,
+    )
+    return tm, means, counts.astype(np.float64)
 
 
 def weighted_line(
@@ -248,9 +259,11 @@ def _fit(
     """:func:`fit_trajectory` without the stray refits, on finite points."""
     order = np.argsort(t, kind="stable")
     t, xyz, conf_pts = t[order], xyz[order], conf_pts[order]
-    ts, ps, ws = time_samples(t, xyz, bin_seconds)
-    _, cs, _ = time_samples(t, np.repeat(conf_pts[:, None], 3, axis=1), bin_seconds)
-    cs = cs[:, 0]
+    # One binning for the positions and the per-point confidences.
+    ts, means, ws = _bin_means(
+        t.astype(np.float64), np.column_stack([xyz, conf_pts]).astype(np.float64), bin_seconds
+    )
+    ps, cs = means[:, :3], means[:, 3]
     breaks = np.nonzero(np.diff(ts) > max_gap)[0] + 1
     groups = np.split(np.arange(ts.size), breaks)
     if reach is not None:
