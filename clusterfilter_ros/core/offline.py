@@ -55,6 +55,7 @@ from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import (
+    Scorer,
     score_pieces,
     split_and_score,
     split_long,
@@ -461,6 +462,63 @@ def continuing_pieces(
     return added
 
 
+def lead_in_piece(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    params: ParamSet,
+) -> list[int]:
+    """lead_in_gap (deviation 114): the piece of a drone's arrival that ended up to
+    ``lead_in_gap`` s before the first selected piece began, seen too briefly or too
+    sparsely to be selected alone, where the drone then stopped out of view and went on
+    from near where it was last seen: a flying cluster (``min_centroid_z``) of at least
+    half ``min_cluster_points`` returns and ``keep_confidence``, moving (``min_speed``)
+    coherently (above ``coherence_floor``), within ``max_local_extent``, whose last
+    returns lie within ``lead_in_reach`` of the selected piece's first ones and head
+    towards them (the velocity over its last second within 60 degrees of that
+    direction), with the piece's start within the linking reach
+    (:func:`~clusterfilter_ros.core.linking.linking_reach`) of where that velocity
+    led. The latest such cluster, or none; no chains."""
+    gap, reach = float(params.lead_in_gap), float(params.lead_in_reach)
+    if gap <= 0 or not selected:
+        return []
+    first = min(selected, key=lambda c: scores.t_first[c])
+    member = labels == first
+    if not member.any():
+        return []
+    track = _piece_ends(first, t[member], xyz[member])
+    ok = (
+        (scores.n_points >= 0.5 * params.min_cluster_points)
+        & (scores.confidence >= params.keep_confidence)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+        & (scores.apparent_speed >= params.min_speed)
+        & (scores.coherence > params.coherence_floor)
+        & (scores.local_extent <= params.max_local_extent)
+        & (scores.t_last < track.first)
+        & (scores.t_last >= track.first - gap)
+    )
+    ok[selected] = False
+    for c in np.flatnonzero(ok)[np.argsort(-scores.t_last[ok], kind="stable")]:
+        member = labels == c
+        ends = _piece_ends(int(c), t[member], xyz[member])
+        way = track.p_first - ends.p_last
+        distance = float(np.linalg.norm(way))
+        speed = float(np.linalg.norm(ends.v_last))
+        if not (distance <= reach and speed > 0):  # NaN velocity: unknown, not taken
+            continue
+        if float(np.dot(ends.v_last, way)) < 0.5 * speed * distance:
+            continue
+        # Where it was heading, the track's start within the linking reach: an arrival
+        # at 11 m/s cannot have stopped 4 m further on in 3.5 s (link_max_accel).
+        dt = track.t_first - ends.t_last
+        miss = float(np.linalg.norm(way - ends.v_last * dt))
+        if miss <= float(linking_reach(np.asarray(dt), params)):
+            return [int(c)]
+    return []
+
+
 def extend_selected(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -571,6 +629,55 @@ def _track_ends(
     return np.asarray(ends, dtype=np.float32).reshape(-1, 3)
 
 
+def cut_unconfident(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    params: ParamSet,
+    score: Scorer,
+) -> tuple[np.ndarray, ClusterScores, np.ndarray | None]:
+    """Unconfident clusters cut in time, each piece scored alone (``score`` with a
+    fixed window origin): a hover then a flight (split_still), then a long pass in
+    pieces (split_long; deviation 90). With split_cut_pieces, a piece of a hover then a
+    flight is then split into kinematic tracks as a merged cluster is (deviation 113):
+    a bird that joined the drone's track for a second leaves the whole smooth enough not
+    to be split, but makes its piece rough. Returns (labels, scores, mask of the points
+    of a cut cluster, None if nothing was cut)."""
+    cut_any = None
+    still = np.zeros(labels.size, dtype=bool)  # the points of split_still's cuts
+    for enabled, cut_in_time in (
+        (params.split_still, split_still),
+        (params.split_long > 0, split_long),
+    ):
+        if not enabled:
+            continue
+        cut_labels, k, cut = cut_in_time(labels, xyz, t, scores, params)
+        scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
+        labels = cut_labels
+        cut_any = cut if cut_any is None else cut_any | cut
+        if cut_in_time is split_still:
+            still = cut
+    if params.split_merged and params.split_cut_pieces and still.any():
+        # Not split_long's pieces: a long bird cluster cut into 4 s pieces then split
+        # gave a bird's smooth leg (no_drone_birds 3302: false alarms 39% -> 74%).
+        labels, _, scores, again = split_and_score(
+            labels,
+            xyz,
+            t,
+            scores,
+            params,
+            score,
+            None,
+            excess_residual=params.split_excess_residual,
+            two_trackers=True,
+            among=np.unique(labels[still & (labels >= 0)]),
+        )
+        assert cut_any is not None
+        cut_any |= again
+    return labels, scores, cut_any
+
+
 def detect_offline(
     frames: Iterable[Frame],
     params: ParamSet | None = None,
@@ -616,17 +723,8 @@ def detect_offline(
             two_trackers=True,
             apart=params.split_apart,
         )
-    # Unconfident clusters cut in time, each piece scored alone: a hover then a flight,
-    # then a long pass in pieces (deviation 90).
-    for enabled, cut_in_time in (
-        (params.split_still, split_still),
-        (params.split_long > 0, split_long),
-    ):
-        if not enabled:
-            continue
-        cut_labels, k, cut = cut_in_time(labels, xyz, t, scores, params)
-        scores = score_pieces(labels, cut_labels, k, cut, xyz, t, scores, params, score)
-        labels = cut_labels
+    labels, scores, cut = cut_unconfident(labels, xyz, t, scores, params, score)
+    if cut is not None:
         was_split = cut if was_split is None else was_split | cut
     spans = tracked_spans(labels, xyz, t, scores, params)
     whole = select_clusters(spans, params)
@@ -636,6 +734,8 @@ def detect_offline(
     )
     if was_split is not None:
         selected += continuing_pieces(labels, xyz, t, scores, selected, was_split, params)
+    lead_in = lead_in_piece(labels, xyz, t, scores, selected, params)
+    selected += lead_in
     rows = scores.rows()
     for row in rows:
         row["selected"] = float(int(row["cluster"]) in selected)
@@ -659,7 +759,10 @@ def detect_offline(
                 xyz, t = np.concatenate([xyz, gxyz]), np.concatenate([t, gt])
                 labels = np.concatenate([labels, np.full(gt.size, -1, labels.dtype)])
                 exclude = np.concatenate([exclude, np.zeros(gt.size, dtype=bool)])
-        labels = extend_selected(labels, xyz, t, scores, selected, params, exclude, near_floor)
+        # Not the lead-in: past its end the drone went out of view, and the growth took
+        # another object's returns there (`default` 4703).
+        grown = [c for c in selected if c not in lead_in]
+        labels = extend_selected(labels, xyz, t, scores, grown, params, exclude, near_floor)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(

@@ -372,6 +372,39 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=600.0,
     ),
     ParamSpec(
+        "split_cut_pieces",
+        "bool",
+        True,
+        "Offline (needs split_merged): a piece that split_still cut off (before, stay, "
+        "after) is split into kinematic tracks as a merged cluster is (split_min_extent, "
+        "split_excess_residual): a bird that joined the drone's track for a second left "
+        "the whole smooth enough not to be split, but the piece it falls in is rough, "
+        "and scored zero. Not split_long's pieces (a long bird cluster's pieces split "
+        "gave a bird's smooth leg); false = the pieces are left whole.",
+    ),
+    ParamSpec(
+        "lead_in_gap",
+        "float",
+        10.0,
+        "Offline: the drone's arrival, seen too briefly or sparsely to be selected alone "
+        "(at least keep_confidence), is reported with the track it leads into if it "
+        "ended at most this many seconds before the track's first selected piece began, "
+        "its last returns within lead_in_reach of the piece's first ones, heading "
+        "towards them, and able to stop there (link_max_accel): the drone stopped out "
+        "of view, then went on from there; 0 = off.",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
+        "lead_in_reach",
+        "float",
+        10.0,
+        "Offline: how far (m) the arrival's last returns may lie from the track's first "
+        "ones for lead_in_gap.",
+        minimum=0.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
         "hover_max_extent",
         "float",
         3.0,

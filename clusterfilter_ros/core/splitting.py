@@ -310,10 +310,12 @@ def split_merged(
     excess_min_points: int = 0,
     cascade: bool = False,
     also: np.ndarray | None = None,
+    among: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """Labels with each of :func:`merged_clusters` (``min_extent``, ``excess_residual``
     and ``excess_min_points`` passed on), and each cluster in ``also``, replaced by its
-    kinematic tracks (``cascade``: :func:`kinematic_tracks`'s).
+    kinematic tracks (``cascade``: :func:`kinematic_tracks`'s); with ``among``, only
+    the clusters in it are split.
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
@@ -326,6 +328,8 @@ def split_merged(
     k = int(labels.max()) + 1 if labels.size else 0
     if also is not None and len(also):
         split = np.union1d(split, np.asarray(also, dtype=split.dtype))
+    if among is not None:
+        split = np.intersect1d(split, np.asarray(among, dtype=split.dtype))
     if split.size and structure_keys is not None and structure_keys.size:
         which = np.zeros(k, dtype=bool)
         which[split] = True
@@ -365,9 +369,11 @@ def split_and_score(
     excess_min_points: int = 0,
     two_trackers: bool = False,
     apart: float = 0.0,
+    among: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
     """:func:`split_merged`, then the scores of the new labels; with ``apart`` > 0,
-    the confident clusters of :func:`crossed_clusters` are split too.
+    the confident clusters of :func:`crossed_clusters` are split too; with ``among``,
+    only clusters in it are split.
 
     Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
     window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
@@ -391,11 +397,11 @@ def split_and_score(
     if apart > 0:
         merged = merged_clusters(scores, params, min_extent, excess_residual, excess_min_points)
         also = crossed_clusters(labels, xyz, t, scores, params, apart, merged)
-    out, k, was_split = split_merged(*args, also=also)
+    out, k, was_split = split_merged(*args, also=also, among=among)
     pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)
     if not two_trackers or not was_split.any():
         return out, k, pieces, was_split
-    alt, k_alt, _ = split_merged(*args, cascade=True, also=also)
+    alt, k_alt, _ = split_merged(*args, cascade=True, also=also, among=among)
     alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
     rank, alt_rank = _reportable_rank(pieces, params), _reportable_rank(alt_pieces, params)
     better = []

@@ -10,6 +10,7 @@ from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.offline import (
     continuing_pieces,
     detect_offline,
+    lead_in_piece,
     occupied_spans,
     reachable_pieces,
     select_trimmed,
@@ -385,3 +386,58 @@ def test_growth_takes_a_fast_drones_isolated_returns_the_denoise_removed():
     assert grown.estimates.stamps[-1] - 1000.0 > 9.0
     err = np.linalg.norm(grown.estimates.xyz - path(grown.estimates.stamps - 1000.0), axis=1)
     assert err.max() < 0.2
+
+
+def _arrival_and_track(
+    arrival_end: tuple[float, float, float],
+    heading: tuple[float, float, float],
+    gap: float,
+    speed: float = 5.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(labels, xyz, t): an arrival (cluster 0, 12 returns over 2.4 s at ``speed`` m/s
+    along ``heading``, ending at ``arrival_end``) and, ``gap`` s later, a track (cluster
+    1) climbing from (10, 5, 12) at 3 m/s for 8 s, two returns a frame."""
+    rng = np.random.default_rng(4)
+    ta = np.linspace(0.0, 2.4, 12)
+    h = np.asarray(heading, float) / np.linalg.norm(heading)
+    arrival = np.asarray(arrival_end) + np.outer(ta - ta[-1], speed * h)
+    tt = np.repeat(np.arange(0.0, 8.0, 0.1), 2) + ta[-1] + gap
+    track = np.column_stack(
+        [np.full(tt.size, 10.0), np.full(tt.size, 5.0), 12.0 + 3.0 * (tt - tt[0])]
+    )
+    xyz = np.vstack([arrival, track]) + rng.normal(0, 0.05, (ta.size + tt.size, 3))
+    labels = np.r_[np.zeros(ta.size, np.int64), np.ones(tt.size, np.int64)]
+    return labels, xyz, np.r_[ta, tt]
+
+
+def test_a_sparse_arrival_is_reported_with_the_track_it_leads_into():
+    # Deviation 114 (`default` 4802: the drone arrived, hovered out of view for 8 s, then
+    # climbed from 9 m away; its arrival, 48 returns at confidence 0.53, went unreported).
+    params = detector_params()
+    # The track's first returns are near (10, 5, 12).
+    cases = {
+        "heading to the track's start": ((4.0, 5.0, 11.0), (1.0, 0.0, 0.2), 5.0, 5.0, [0]),
+        "heading away": ((4.0, 5.0, 11.0), (-1.0, 0.0, -0.2), 5.0, 5.0, []),
+        "too far": ((-6.0, 5.0, 11.0), (1.0, 0.0, 0.0), 5.0, 5.0, []),
+        "too long before": ((4.0, 5.0, 11.0), (1.0, 0.0, 0.2), 12.0, 5.0, []),
+        # At 12 m/s it cannot have stopped within 3.5 s where the track begins.
+        "too fast to stop there": ((8.0, 5.0, 11.6), (1.0, 0.0, 0.2), 3.0, 12.0, []),
+        "slow enough to": ((8.0, 5.0, 11.6), (1.0, 0.0, 0.2), 3.0, 5.0, [0]),
+    }
+    for name, (end, heading, gap, speed, expected) in cases.items():
+        labels, xyz, t = _arrival_and_track(end, heading, gap, speed)
+        scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+        assert scores.n_points[0] < params.min_cluster_points  # not selectable alone
+        got = lead_in_piece(labels, xyz, t, scores, [1], params)
+        assert got == expected, name
+        assert lead_in_piece(labels, xyz, t, scores, [1], params.copy(lead_in_gap=0.0)) == []
+    # Only link_max_accel held the fast one back.
+    labels, xyz, t = _arrival_and_track((8.0, 5.0, 11.6), (1.0, 0.0, 0.2), 3.0, 12.0)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    assert lead_in_piece(labels, xyz, t, scores, [1], params.copy(link_max_accel=100.0)) == [0]
+    # Below keep_confidence (a bird's erratic leg near the drone's start): not taken.
+    labels, xyz, t = _arrival_and_track((4.0, 5.0, 11.0), (1.0, 0.0, 0.2), 5.0)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    weak = dataclasses.replace(scores, confidence=np.array([0.2, scores.confidence[1]]))
+    assert lead_in_piece(labels, xyz, t, scores, [1], params) == [0]
+    assert lead_in_piece(labels, xyz, t, weak, [1], params) == []

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from clusterfilter_ros.core import splitting, voxel
 from clusterfilter_ros.core.frame import AVIA, Frame
-from clusterfilter_ros.core.offline import detect_offline
+from clusterfilter_ros.core.offline import cut_unconfident, detect_offline
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters
 from clusterfilter_ros.core.splitting import (
@@ -576,3 +577,48 @@ def test_a_confident_cluster_a_bird_crossed_is_split_only_with_split_apart():
     mine = out[drone][0]
     assert np.all(out[drone] == mine) and not np.any(out[~drone] == mine)
     assert pieces.confidence[mine] >= params.min_confidence
+
+
+def test_a_piece_cut_in_time_is_split_when_a_bird_made_it_rough():
+    # Deviation 113. Simulated `default` seed 4904: a drone flies 6 s, hovers 7 s, climbs
+    # away; a bird passing at 15.3-15.6 s joined its cluster (23 of 516 returns). In the
+    # whole scene the cluster was smooth enough (excess residual 0.27 m) not to be split
+    # as merged, but below min_confidence, so it was cut into before / stay / after, and
+    # the bird made the last piece rough: scored zero, 6 s of the drone went unreported.
+    data = np.load(Path(__file__).parent / "data" / "default_4904_drone_and_bird.npz")
+    t, xyz, drone = data["t"].astype(np.float64), data["xyz"], data["drone"]
+    params = detector_params()
+    labels = np.zeros(t.size, dtype=np.int64)
+    score = functools.partial(score_clusters, t0=float(t.min()), coherence_origin=float(t.min()))
+    scores = score(labels, xyz, t, params, n_clusters=1)
+    assert scores.confidence[0] < params.min_confidence
+    out, pieces, cut = cut_unconfident(labels, xyz, t, scores, params, score)
+    assert cut is not None and cut.all()
+    after = out[drone & (t > 13.5)]
+    assert np.unique(after).size == 1  # the climb away is one piece, without the bird
+    piece = int(after[0])
+    assert not (~drone & (out == piece)).any()
+    assert pieces.confidence[piece] >= params.min_confidence and pieces.candidate[piece]
+    # Left whole, the piece holds the bird's returns and scores zero.
+    out, pieces, _ = cut_unconfident(
+        labels, xyz, t, scores, params.copy(split_cut_pieces=False), score
+    )
+    piece = int(out[drone & (t > 13.5)][0])
+    assert (~drone & (out == piece)).sum() == 23 and pieces.confidence[piece] == 0.0
+
+
+def test_split_merged_among_splits_only_the_clusters_given():
+    rng = np.random.default_rng(3)
+    t = np.repeat(np.arange(0.0, 6.0, 0.1), 2)
+    xyz = np.column_stack([4.0 * t, np.zeros_like(t), np.full_like(t, 25.0)])
+    bird = np.column_stack([-4.0 * t + 24.0, np.zeros_like(t) + 0.3, np.full_like(t, 25.0)])
+    both = np.vstack([xyz, bird, xyz + [0.0, 60.0, 0.0], bird + [0.0, 60.0, 0.0]])
+    both += rng.normal(0, 0.05, both.shape)
+    tt = np.tile(t, 4)
+    labels = np.repeat([0, 0, 1, 1], t.size)
+    params = detector_params()
+    scores = score_clusters(labels, both, tt, params, n_clusters=2)
+    assert set(merged_clusters(scores, params)) == {0, 1}  # two crossings, both too wide
+    out, k, was = split_merged(labels, both, tt, scores, params, among=np.array([1]))
+    assert not was[labels == 0].any() and was[labels == 1].all()
+    assert np.unique(out[labels == 0]).size == 1 and np.unique(out[labels == 1]).size >= 2
