@@ -528,8 +528,10 @@ def extend_selected(
     params: ParamSet,
     exclude: np.ndarray | None = None,
     near_floor: np.ndarray | None = None,
+    start_only: frozenset[int] = frozenset(),
 ) -> np.ndarray:
-    """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`)
+    """Labels with each selected track grown at its ends (:func:`~.linking.extend_track`;
+    the ``start_only`` ones backwards only)
     and filled inside (:func:`~.linking.fill_track`) by noise points and clusters too
     small to be scored (< ``min_cluster_points``), and inside also by the points of other
     scored clusters within ``track_gate`` of its path; never by the points in
@@ -550,7 +552,9 @@ def extend_selected(
         scored &= ~exclude
     out = labels.copy()
     for c in selected:
-        grown = extend_track(out == c, xyz, t, pool, params, short_gap=near_floor)
+        grown = extend_track(
+            out == c, xyz, t, pool, params, short_gap=near_floor, grow_end=c not in start_only
+        )
         member = fill_track(grown, xyz, t, pool, params)
         member = fill_track(member, xyz, t, scored, params, max_reach=params.track_gate)
         pool &= ~member
@@ -759,10 +763,11 @@ def detect_offline(
                 xyz, t = np.concatenate([xyz, gxyz]), np.concatenate([t, gt])
                 labels = np.concatenate([labels, np.full(gt.size, -1, labels.dtype)])
                 exclude = np.concatenate([exclude, np.zeros(gt.size, dtype=bool)])
-        # Not the lead-in: past its end the drone went out of view, and the growth took
-        # another object's returns there (`default` 4703).
-        grown = [c for c in selected if c not in lead_in]
-        labels = extend_selected(labels, xyz, t, scores, grown, params, exclude, near_floor)
+        # The lead-in grows backwards only: past its end the drone went out of view, and
+        # growth there took another object's returns (`default` 4703).
+        labels = extend_selected(
+            labels, xyz, t, scores, selected, params, exclude, near_floor, frozenset(lead_in)
+        )
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(
