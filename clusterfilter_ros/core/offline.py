@@ -633,6 +633,34 @@ def _track_ends(
     return np.asarray(ends, dtype=np.float32).reshape(-1, 3)
 
 
+def split_offline(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    params: ParamSet,
+    score: Scorer,
+    apart: float = 0.0,
+    among: np.ndarray | None = None,
+) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
+    """:func:`~.splitting.split_and_score` as offline splits: whatever the cluster's
+    contact with suppressed structure, a narrow cluster below ``min_confidence`` above
+    ``split_excess_residual`` too, with two trackers; ``apart`` and ``among`` passed on."""
+    return split_and_score(
+        labels,
+        xyz,
+        t,
+        scores,
+        params,
+        score,
+        None,
+        excess_residual=params.split_excess_residual,
+        two_trackers=True,
+        apart=apart,
+        among=among,
+    )
+
+
 def cut_unconfident(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -665,18 +693,8 @@ def cut_unconfident(
     if params.split_merged and params.split_cut_pieces and still.any():
         # Not split_long's pieces: a long bird cluster cut into 4 s pieces then split
         # gave a bird's smooth leg (no_drone_birds 3302: false alarms 39% -> 74%).
-        labels, _, scores, again = split_and_score(
-            labels,
-            xyz,
-            t,
-            scores,
-            params,
-            score,
-            None,
-            excess_residual=params.split_excess_residual,
-            two_trackers=True,
-            among=np.unique(labels[still & (labels >= 0)]),
-        )
+        among = np.unique(labels[still & (labels >= 0)])
+        labels, _, scores, again = split_offline(labels, xyz, t, scores, params, score, among=among)
         assert cut_any is not None
         cut_any |= again
     return labels, scores, cut_any
@@ -715,17 +733,8 @@ def detect_offline(
         # birds circling a drone for seconds make voxels static around both, and the
         # merged cluster, barely coherent, was left whole as a remnant of structure.
         # Streaming keeps the contact test (it let a bird piece be reported live).
-        labels, k, scores, was_split = split_and_score(
-            labels,
-            xyz,
-            t,
-            scores,
-            params,
-            score,
-            None,
-            excess_residual=params.split_excess_residual,
-            two_trackers=True,
-            apart=params.split_apart,
+        labels, k, scores, was_split = split_offline(
+            labels, xyz, t, scores, params, score, apart=params.split_apart
         )
     labels, scores, cut = cut_unconfident(labels, xyz, t, scores, params, score)
     if cut is not None:
