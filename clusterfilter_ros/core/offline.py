@@ -675,7 +675,7 @@ def cut_unconfident(
     flight is then split into kinematic tracks as a merged cluster is (deviation 113):
     a bird that joined the drone's track for a second leaves the whole smooth enough not
     to be split, but makes its piece rough. Returns (labels, scores, mask of the points
-    of a cut cluster, None if nothing was cut)."""
+    of a cut cluster; None when neither cut is enabled)."""
     cut_any = None
     still = np.zeros(labels.size, dtype=bool)  # the points of split_still's cuts
     for enabled, cut_in_time in (
