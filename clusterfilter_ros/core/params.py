@@ -770,6 +770,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=1000.0,
     ),
     ParamSpec(
+        "stream_track_agree",
+        "bool",
+        True,
+        "Streaming: when a re-clustering rebuilds the reported track from a cluster that "
+        "still holds some of its samples, a new sample more than track_gate from where "
+        "the reported track was at its time is another object's and is skipped: a bird "
+        "that joined the drone's cluster as the drone left, in the seconds the track "
+        "already covered; false = the rebuilt track is taken as it is.",
+    ),
+    ParamSpec(
         "stream_split_track",
         "bool",
         True,

@@ -345,6 +345,9 @@ class _HistorySnapshot:
     params: ParamSet
     # Time of the reported track's oldest sample, with ``expected``.
     track_from: float | None = None
+    # stream_track_agree: (times (S,), positions (S, 3)) of the reported track's
+    # samples, with ``expected``.
+    track_path: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -735,6 +738,12 @@ class StreamingDetector:
             else (self._last_reported[0], self._last_reported[1]),
             params=p,
             track_from=None if expected is None or not self._track else self._track[0].t,
+            track_path=None
+            if expected is None or not self._track or not p.stream_track_agree
+            else (
+                np.array([s.t for s in self._track]),
+                np.array([s.position for s in self._track]),
+            ),
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
         if self.background:
@@ -1568,7 +1577,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     def choice(
         mask: np.ndarray | None, confidence: float, new: bool, k: int, coast: bool = False
     ) -> _TrackChoice:
-        samples = None if mask is None else _track_samples(mask, xyz, t, p)
+        samples = None if mask is None else _track_samples(mask, xyz, t, p, snap.track_path)
         head: tuple[_TrackSample, ...] = ()
         tail: tuple[_TrackSample, ...] = ()
         inner: tuple[_TrackSample, ...] = ()
@@ -1694,13 +1703,26 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     return choice(None, 0.0, False, k, coast=bool(sparse))
 
 
+#: Samples a rebuilt track must share with the reported one for deviation 115 to judge
+#: it by the reported track (it continues that track).
+_SHARED_SAMPLES = 3
+
+
 def _track_samples(
-    mask: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+    mask: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    params: ParamSet,
+    reported: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[_TrackSample]:
     """A track from the points in ``mask``: one sample per half frame period, skipping a
     sample that no object could have reached from the sample kept before it (deviation
     39), and, within ``track_window`` of the newest return, one off the path of the
-    samples kept before it (:func:`_on_own_path`, deviation 60)."""
+    samples kept before it (:func:`_on_own_path`, deviation 60). With ``reported`` (the
+    reported track's sample times and positions, stream_track_agree), when the new
+    samples hold some of the reported track's own, one that lies more than
+    ``track_gate`` from where the reported track was at its time (between two of its
+    samples at most ``link_max_gap`` apart) is another object's (deviation 115)."""
     pts, tt = xyz[mask], t[mask]
     if tt.size == 0:
         return []
@@ -1710,10 +1732,15 @@ def _track_samples(
     bins, pts, tt = bins[order], pts[order], tt[order]
     cuts = np.nonzero(np.diff(bins))[0] + 1
     newest = float(tt.max())
+    groups = np.split(np.arange(bins.size), cuts)
+    times = np.array([tt[idx].mean() for idx in groups])
+    means = np.array([pts[idx].mean(axis=0, dtype=np.float64) for idx in groups])
+    conflict = _off_reported(times, means, reported, params)
     samples: list[_TrackSample] = []
-    for idx in np.split(np.arange(bins.size), cuts):
-        group = pts[idx]
-        sample = _TrackSample(float(tt[idx].mean()), group.mean(axis=0, dtype=np.float64), group)
+    for i, idx in enumerate(groups):
+        if conflict[i]:
+            continue
+        sample = _TrackSample(float(times[i]), means[i], pts[idx])
         if samples:
             # A sample farther from the one kept before than track_gate plus
             # link_max_speed allows is another object the linking joined to the cluster
@@ -1728,6 +1755,37 @@ def _track_samples(
                 continue
         samples.append(sample)
     return samples
+
+
+def _off_reported(
+    times: np.ndarray,
+    means: np.ndarray,
+    reported: tuple[np.ndarray, np.ndarray] | None,
+    params: ParamSet,
+) -> np.ndarray:
+    """(S,) bool: the samples (``times``, ``means``) that contradict the reported track
+    (deviation 115, :func:`_track_samples`): if at least :data:`_SHARED_SAMPLES` of them
+    are the reported track's own (same time and place), those more than ``track_gate``
+    from where it was, linearly between two of its samples at most ``link_max_gap``
+    apart. All False otherwise: another object chosen is not judged by the old track."""
+    out = np.zeros(times.size, dtype=bool)
+    if reported is None or times.size == 0 or reported[0].size < 2:
+        return out
+    rt, rp = reported
+    # Shared: a sample within 1 ms and 1 cm of one of the reported track's.
+    j = np.clip(np.searchsorted(rt, times), 1, rt.size - 1)
+    near = np.where(np.abs(rt[j - 1] - times) <= np.abs(rt[j] - times), j - 1, j)
+    same = (np.abs(rt[near] - times) < 1e-3) & (np.linalg.norm(rp[near] - means, axis=1) < 0.01)
+    if np.count_nonzero(same) < _SHARED_SAMPLES:
+        return out
+    inside = (times > rt[0]) & (times < rt[-1])
+    k = np.clip(np.searchsorted(rt, times), 1, rt.size - 1)
+    gap = rt[k] - rt[k - 1]
+    bracketed = inside & (gap <= params.link_max_gap) & (gap > 0)
+    w = np.where(bracketed, (times - rt[k - 1]) / np.where(gap > 0, gap, 1.0), 0.0)
+    where = rp[k - 1] + w[:, None] * (rp[k] - rp[k - 1])
+    off = np.linalg.norm(means - where, axis=1) > params.track_gate
+    return bracketed & off & ~same
 
 
 def _after_run(run: tuple[float, float, bool]) -> float:

@@ -17,6 +17,7 @@ from clusterfilter_ros.core.scoring import score_clusters
 from clusterfilter_ros.core.streaming import (
     StreamingDetector,
     _joined_track,
+    _off_reported,
     _split_track,
     _track_samples,
     run_streaming,
@@ -1013,3 +1014,41 @@ def test_a_reported_tracks_cluster_joined_by_a_bird_keeps_the_drones_piece():
     moved = xyz + np.where((t < 3.0) & is_drone, 6.0, 0.0)[:, None] * [0.0, 1.0, 0.0]
     assert _split_track(0, labels, moved, t, snap, scorer, ps) is None
     assert _split_track(0, labels, moved, t, older, scorer, ps) is None
+
+
+def _drone_then_bird() -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """(xyz, t, reported): a drone at 9 m/s whose returns stop at 1.2 s, then a bird 8 m
+    off its path flying back at 13 m/s until 3 s, in one cluster; ``reported`` is the
+    drone's track as reported up to 2 s (the drone's samples at 0-2 s)."""
+    td = np.round(np.arange(0.0, 1.25, 0.1), 3)
+    tb = np.round(np.arange(1.3, 3.05, 0.1), 3)
+    drone = np.column_stack([9.0 * td, np.zeros_like(td), np.full_like(td, 20.0)])
+    bird = np.column_stack(
+        [11.7 - 13.0 * (tb - 1.3), np.full_like(tb, 8.0), np.full_like(tb, 18.0)]
+    )
+    tr = np.round(np.arange(0.0, 2.05, 0.1), 3)
+    reported = (tr, np.column_stack([9.0 * tr, np.zeros_like(tr), np.full_like(tr, 20.0)]))
+    return np.vstack([drone, bird]).astype(np.float32), np.r_[td, tb], reported
+
+
+def test_a_rebuilt_track_does_not_take_another_object_where_it_was_reported():
+    # Deviation 115 (fast_pass 5200 of the fifty-first set): the drone's far returns left
+    # the cluster and a bird's joined it where the reported track already was; once the
+    # bird's first returns were older than track_window, the track became the bird's.
+    params = detector_params()
+    xyz, t, reported = _drone_then_bird()
+    mask = np.ones(t.size, dtype=bool)
+    kept = _track_samples(mask, xyz, t, params, reported)
+    assert [s.t for s in kept] == pytest.approx(list(np.arange(0.0, 1.25, 0.1)))
+    loose = _track_samples(mask, xyz, t, params)
+    assert any(s.position[1] > 4.0 for s in loose)  # without it the bird is taken
+    # Three of the drone's samples, shared, and the bird's at 1.5 s, 8 m from where the
+    # drone was reported then.
+    times = np.array([0.0, 0.1, 0.2, 1.5])
+    means = np.array([[0.0, 0.0, 20.0], [0.9, 0.0, 20.0], [1.8, 0.0, 20.0], [9.1, 8.0, 18.0]])
+    assert list(_off_reported(times, means, reported, params)) == [False, False, False, True]
+    assert not _off_reported(times[2:], means[2:], reported, params).any()  # 1 shared
+    # A cluster sharing fewer than three samples with the reported track is another
+    # object chosen: it is not judged by the old track, and the bird is taken as before.
+    shifted = (reported[0] + 0.05, reported[1])
+    assert any(s.position[1] > 4.0 for s in _track_samples(mask, xyz, t, params, shifted))
