@@ -1771,7 +1771,8 @@ def _off_reported(
     out = np.zeros(times.size, dtype=bool)
     if reported is None or times.size == 0 or reported[0].size < 2:
         return out
-    rt, rp = reported
+    order = np.argsort(reported[0], kind="stable")  # in time order already, as a rule
+    rt, rp = reported[0][order], reported[1][order]
     # Shared: a sample within 1 ms and 1 cm of one of the reported track's.
     j = np.clip(np.searchsorted(rt, times), 1, rt.size - 1)
     near = np.where(np.abs(rt[j - 1] - times) <= np.abs(rt[j] - times), j - 1, j)
