@@ -1779,8 +1779,9 @@ def _off_reported(
     same = (np.abs(rt[near] - times) < 1e-3) & (np.linalg.norm(rp[near] - means, axis=1) < 0.01)
     if np.count_nonzero(same) < _SHARED_SAMPLES:
         return out
+    # Where the reported track was: between its samples j - 1 and j.
     inside = (times > rt[0]) & (times < rt[-1])
-    k = np.clip(np.searchsorted(rt, times), 1, rt.size - 1)
+    k = j
     gap = rt[k] - rt[k - 1]
     bracketed = inside & (gap <= params.link_max_gap) & (gap > 0)
     w = np.where(bracketed, (times - rt[k - 1]) / np.where(gap > 0, gap, 1.0), 0.0)
