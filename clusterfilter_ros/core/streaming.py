@@ -740,10 +740,7 @@ class StreamingDetector:
             track_from=None if expected is None or not self._track else self._track[0].t,
             track_path=None
             if expected is None or not self._track or not p.stream_track_agree
-            else (
-                np.array([s.t for s in self._track]),
-                np.array([s.position for s in self._track]),
-            ),
+            else _sample_arrays(self._track)[:2],
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
         if self.background:
@@ -1781,11 +1778,10 @@ def _off_reported(
         return out
     # Where the reported track was: between its samples j - 1 and j.
     inside = (times > rt[0]) & (times < rt[-1])
-    k = j
-    gap = rt[k] - rt[k - 1]
+    gap = rt[j] - rt[j - 1]
     bracketed = inside & (gap <= params.link_max_gap) & (gap > 0)
-    w = np.where(bracketed, (times - rt[k - 1]) / np.where(gap > 0, gap, 1.0), 0.0)
-    where = rp[k - 1] + w[:, None] * (rp[k] - rp[k - 1])
+    w = np.where(bracketed, (times - rt[j - 1]) / np.where(gap > 0, gap, 1.0), 0.0)
+    where = rp[j - 1] + w[:, None] * (rp[j] - rp[j - 1])
     off = np.linalg.norm(means - where, axis=1) > params.track_gate
     return bracketed & off & ~same
 
