@@ -1174,6 +1174,20 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=50.0,
     ),
     ParamSpec(
+        "track_join_link",
+        "float",
+        1.0,
+        "Streaming: a track sample is one object's returns, chained by steps of at most "
+        "this (m): of a frame's points within track_gate of a moving live track's "
+        "predicted position, those chained to the one nearest it join the track (a bird "
+        "crossing 1-2 m from the drone is not averaged into its sample, nor drags the "
+        "track after it); a rebuilt track's sample of half a frame holds its largest "
+        "such group (a noise return 10 m off in the drone's cluster does not move the "
+        "sample); 0 = every return within the gate, or in the half frame.",
+        minimum=0.0,
+        maximum=50.0,
+    ),
+    ParamSpec(
         "keep_confidence",
         "float",
         0.25,

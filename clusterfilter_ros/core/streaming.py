@@ -55,6 +55,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid
@@ -1141,8 +1143,10 @@ class StreamingDetector:
             return
         gate = p.track_gate
         d2 = np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1)
-        near = d2 <= gate**2
-        if near.any():
+        near = np.flatnonzero(d2 <= gate**2)
+        if near.size:
+            if float(np.linalg.norm(velocity)) >= p.min_speed:
+                near = near[_nearest_group(xyz[near], d2[near], p.track_join_link)]
             group = xyz[near]
             self._track.append(
                 _TrackSample(float(t[near].mean()), group.mean(axis=0, dtype=np.float64), group)
@@ -1586,11 +1590,8 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 gt = np.concatenate([t, dropped[1]])
                 gmask = np.concatenate([mask, np.zeros(dropped[1].size, bool)])
                 gpool = np.concatenate([pool, np.ones(dropped[1].size, bool)])
-            if p.report_extend_head:
-                head = _grown(gmask, gpool, gxyz, gt, samples[0].t, p, forward=False)
-            if p.report_extend_tail:
-                tail = _grown(gmask, gpool, gxyz, gt, samples[-1].t, p, forward=True)
-                tail = _short_of_structure(tail, structure, p)
+            head, tail = _grown_ends(gmask, gpool, gxyz, gt, samples, p)
+            tail = _short_of_structure(tail, structure, p)
             if p.report_fill:
                 inner = _filled_gaps(gmask, gpool, gxyz, gt, p)
         ms = (time.perf_counter() - start) * 1e3
@@ -1730,6 +1731,16 @@ def _track_samples(
     cuts = np.nonzero(np.diff(bins))[0] + 1
     newest = float(tt.max())
     groups = np.split(np.arange(bins.size), cuts)
+    link = params.track_join_link
+    if link > 0.0:
+        # A bin's returns spread wider than a drone are not all the drone's: its mean
+        # lay between the drone and a noise return 10 m off, and the drone's next
+        # samples then failed the path check (deviation 116).
+        starts = np.r_[0, cuts]
+        spread = np.maximum.reduceat(pts, starts, axis=0) - np.minimum.reduceat(pts, starts, axis=0)
+        for i in np.flatnonzero(np.linalg.norm(spread, axis=1) > link):
+            near = pts[groups[i - 1]].mean(axis=0, dtype=np.float64) if i > 0 else None
+            groups[i] = groups[i][_main_group(pts[groups[i]], link, near)]
     times = np.array([tt[idx].mean() for idx in groups])
     means = np.array([pts[idx].mean(axis=0, dtype=np.float64) for idx in groups])
     conflict = _off_reported(times, means, reported, params)
@@ -1752,6 +1763,42 @@ def _track_samples(
                 continue
         samples.append(sample)
     return samples
+
+
+def _linked_components(points: np.ndarray, link: float) -> np.ndarray:
+    """(N,) component label of each of a few ``points``: chained by steps of at most
+    ``link`` (single linkage)."""
+    pts = points.astype(np.float64)
+    adjacent = np.sum((pts[:, None, :] - pts[None, :, :]) ** 2, axis=2) <= link * link
+    return connected_components(csr_matrix(adjacent), directed=False)[1]
+
+
+def _nearest_group(points: np.ndarray, d2: np.ndarray, link: float) -> np.ndarray:
+    """Indices of ``points`` chained to the one with the smallest ``d2`` (squared distance
+    to a predicted position) by steps of at most ``link``; all of them when ``link`` is
+    0 or they span no more than it (deviation 116)."""
+    n = points.shape[0]
+    if n == 1 or link <= 0.0 or float(np.linalg.norm(np.ptp(points, axis=0))) <= link:
+        return np.arange(n)
+    labels = _linked_components(points, link)
+    return np.flatnonzero(labels == labels[int(np.argmin(d2))])
+
+
+def _main_group(points: np.ndarray, link: float, near: np.ndarray | None) -> np.ndarray:
+    """Indices of the largest group of ``points`` chained by steps of at most ``link``;
+    of equal ones, the one whose mean is nearest ``near`` (if given); all of them when
+    they span no more than ``link`` (deviation 116)."""
+    n = points.shape[0]
+    if n == 1 or link <= 0.0 or float(np.linalg.norm(np.ptp(points, axis=0))) <= link:
+        return np.arange(n)
+    labels = _linked_components(points, link)
+    ids, sizes = np.unique(labels, return_counts=True)
+    best = ids[sizes == sizes.max()]
+    if best.size > 1 and near is not None:
+        pts = points.astype(np.float64)
+        d = [float(np.sum((pts[labels == k].mean(axis=0) - near) ** 2)) for k in best]
+        best = best[[int(np.argmin(d))]]
+    return np.flatnonzero(labels == best[0])
 
 
 def _off_reported(
@@ -1790,6 +1837,34 @@ def _after_run(run: tuple[float, float, bool]) -> float:
     """The stamp from which the live run after ``run`` (of
     :meth:`StreamingDetector._live_run`) is looked for: just past its last estimate."""
     return math.nextafter(run[1], math.inf)
+
+
+def _grown_ends(
+    mask: np.ndarray,
+    pool: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    samples: list[_TrackSample],
+    params: ParamSet,
+) -> tuple[tuple[_TrackSample, ...], tuple[_TrackSample, ...]]:
+    """(head, tail): the samples the track of ``samples``, rebuilt from the cluster of
+    ``mask``, grows into before its first sample (report_extend_head) and after its
+    newest (report_extend_tail), :func:`_grown`. Each end grows from the track's own
+    samples, not from the cluster's end: the cluster's returns beyond them are those the
+    rebuilt track left out (deviations 39, 60 and 115), and grown from there the tail
+    followed a bird that crossed the drone's path (deviation 117). Those returns may
+    still be taken, as the pool's are, where the track was heading (the drone's own,
+    left out behind a sample another object's returns had moved)."""
+    half = params.frame_period / 2
+    head: tuple[_TrackSample, ...] = ()
+    tail: tuple[_TrackSample, ...] = ()
+    if params.report_extend_head:
+        own = mask & (t >= samples[0].t - half)
+        head = _grown(own, pool | (mask & ~own), xyz, t, samples[0].t, params, forward=False)
+    if params.report_extend_tail:
+        own = mask & (t <= samples[-1].t + half)
+        tail = _grown(own, pool | (mask & ~own), xyz, t, samples[-1].t, params, forward=True)
+    return head, tail
 
 
 def _grown(

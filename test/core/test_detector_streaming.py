@@ -233,6 +233,34 @@ def test_one_stray_sample_does_not_take_the_track_off_its_path():
     assert [s.t for s in track] == pytest.approx(list(t))
 
 
+def test_a_rebuilt_sample_is_the_drones_returns_not_a_return_far_off_in_its_frame():
+    # flyover 5003: a noise return 9.6 m from the drone's five, in the same half frame
+    # and in the same cluster, moved the sample 1.8 m; the drone's next samples failed
+    # the path check and the track lost them (deviation 116).
+    p = detector_params()
+    t = np.round(np.arange(0.0, 2.0, 0.1), 6)
+    drone = np.column_stack([8.0 * t, np.full(t.size, 20.0), np.full(t.size, 44.0)])
+    xyz = np.repeat(drone, 5, axis=0) + np.tile(np.linspace(-0.2, 0.2, 5)[:, None], (t.size, 3))
+    times = np.repeat(t, 5)
+    noise_t = 1.5
+    noise = np.array([8.0 * noise_t - 6.7, 13.1, 40.6])
+    xyz = np.vstack([xyz, noise]).astype(np.float32)
+    times = np.append(times, noise_t + 0.01)
+    track = _track_samples(np.ones(times.size, bool), xyz, times, p)
+    assert [s.t for s in track] == pytest.approx(list(t))
+    assert all(s.points.shape[0] == 5 for s in track)
+    np.testing.assert_allclose([s.position for s in track], drone, atol=1e-4)
+    # Without it, that sample holds the noise return and lies 1.6 m off the drone.
+    off = _track_samples(np.ones(times.size, bool), xyz, times, p.copy(track_join_link=0.0))
+    at = next(s for s in off if s.points.shape[0] == 6)
+    assert np.linalg.norm(at.position - drone[15]) > 1.5
+    # Two single returns in a half frame: the one nearer the sample before is kept.
+    bird = drone[15] + [0.0, 1.5, 0.3]
+    two = np.vstack([drone, bird]).astype(np.float32)
+    track = _track_samples(np.ones(t.size + 1, bool), two, np.append(t, t[15]), p)
+    np.testing.assert_allclose(track[15].position, drone[15], atol=1e-4)
+
+
 def test_only_the_newest_samples_are_held_to_the_tracks_own_path():
     # Another object's returns at the cluster's start would make the path the drone's
     # samples are compared with: the rule applies within track_window of the newest.
@@ -494,6 +522,31 @@ def test_a_return_after_a_gap_is_associated_and_not_averaged_with_the_old_ones()
     # A return far from the prediction is not associated.
     det._extend_track(1.2, np.array([[30.0, 30.0, 20.0]], np.float32), np.array([1.2]))
     assert det._track[-1].t == t_new
+
+
+def test_a_bird_within_the_gate_is_not_averaged_into_the_drones_sample():
+    # default 5301: a bird crossed 1.2-1.5 m from the drone as it left; the samples
+    # averaged both, the track turned towards the bird and lost the drone.
+    times = np.array([0.0, 0.1, 0.2, 0.3])
+    det = _tracked(times, [(10.0 + 6.0 * t, 5.0, 20.0) for t in times])
+    t_new = 0.4
+    drone = [10.0 + 6.0 * t_new + 0.3, 5.0, 20.0]
+    bird = [10.0 + 6.0 * t_new + 0.3, 6.4, 20.3]  # 1.4 m from the drone, in the 2 m gate
+    xyz = np.array([drone, bird], np.float32)
+    det._extend_track(t_new, xyz, np.array([t_new, t_new]))
+    assert len(det._track) == 5
+    assert det._track[-1].points.shape[0] == 1
+    np.testing.assert_allclose(det._track[-1].position, drone, atol=1e-5)
+    # Returns chained by steps within track_join_link (a drone's smear over its scan)
+    # join together; with 0 every return in the gate joins, as before deviation 116.
+    smear = np.array([drone, [drone[0] + 0.8, 5.0, 20.0], [drone[0] + 1.6, 5.0, 20.0]])
+    for link, joined in ((1.0, 3), (0.5, 1)):
+        det = _tracked(times, [(10.0 + 6.0 * t, 5.0, 20.0) for t in times], track_join_link=link)
+        det._extend_track(t_new, smear.astype(np.float32), np.full(3, t_new))
+        assert det._track[-1].points.shape[0] == joined
+    det = _tracked(times, [(10.0 + 6.0 * t, 5.0, 20.0) for t in times], track_join_link=0.0)
+    det._extend_track(t_new, xyz, np.array([t_new, t_new]))
+    assert det._track[-1].points.shape[0] == 2
 
 
 def test_persistence_map_is_the_same_with_one_hit_per_voxel_and_bin():

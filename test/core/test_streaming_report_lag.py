@@ -1265,3 +1265,37 @@ def test_a_frame_between_two_live_runs_on_one_track_is_reported_late(scene):
     assert len(stamps) >= 10 and stamps.min() <= 1007.3 and stamps.max() >= 1007.9
     err = np.linalg.norm(np.array([e.position for e in late[True]]) - path(stamps - 1000), axis=1)
     assert err.max() < 0.5
+
+
+def test_the_late_tail_grows_from_the_tracks_own_end_not_the_clusters():
+    # fast_pass 5200: a bird crossing the drone's path joined its cluster after the
+    # drone's returns thinned out; grown from the cluster's end, the late tail followed
+    # the bird for 1.7 s after the drone's track (deviation 117).
+    from clusterfilter_ros.core.streaming import _grown, _grown_ends, _track_samples
+
+    p = detector_params({"report_lag": 3.0})
+    t_drone = np.arange(0.0, 2.01, 0.1)
+    drone = np.stack([10.0 * t_drone, np.zeros_like(t_drone), np.full_like(t_drone, 20.0)], 1)
+    t_bird = np.arange(2.1, 3.01, 0.1)
+    bird = np.stack(
+        [22.0 - 12.0 * (t_bird - 2.1), np.full_like(t_bird, 4.0), np.full_like(t_bird, 20.0)], 1
+    )
+    t_far = np.array([2.6, 3.1])  # the drone's lone far returns, on its line
+    far = np.stack([10.0 * t_far, np.zeros(2), np.full(2, 20.0)], 1)
+    t_on = np.arange(3.1, 4.01, 0.1)  # the bird flying on
+    on = np.stack(
+        [22.0 - 12.0 * (t_on - 2.1), np.full_like(t_on, 4.0), np.full_like(t_on, 20.0)], 1
+    )
+    xyz = np.vstack([drone, bird, far, on]).astype(np.float32)
+    t = np.concatenate([t_drone, t_bird, t_far, t_on])
+    n_cluster = t_drone.size + t_bird.size
+    mask = np.arange(t.size) < n_cluster
+    pool = ~mask
+    samples = _track_samples(np.arange(t.size) < t_drone.size, xyz, t, p)
+    head, tail = _grown_ends(mask, pool, xyz, t, samples, p)
+    assert head == ()
+    np.testing.assert_allclose([s.t for s in tail], t_far)
+    np.testing.assert_allclose([s.position[1] for s in tail], 0.0)
+    # From the cluster's end, the tail is the bird's.
+    from_cluster = _grown(mask, pool, xyz, t, samples[-1].t, p, forward=True)
+    assert from_cluster and all(s.position[1] == pytest.approx(4.0) for s in from_cluster)
