@@ -739,6 +739,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "split_low_flying",
+        "bool",
+        True,
+        "Splitting merged clusters: a cluster whose centroid is below min_centroid_z is "
+        "split too when at least twice min_cluster_points of its returns are at least "
+        "min_centroid_z high (a drone flying low over a person joined the person's "
+        "cluster, whose low centroid then gated the whole out); false = the centroid "
+        "alone decides.",
+    ),
+    ParamSpec(
         "split_apart",
         "float",
         3.0,

@@ -263,18 +263,20 @@ def merged_clusters(
     min_extent: float | None = None,
     excess_residual: float = 0.0,
     excess_min_points: int = 0,
+    high: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Indices of the clusters to split: flying (centroid at least ``min_centroid_z``
-    high), with at least twice ``min_cluster_points`` and at most ``max_cluster_points``
-    points, and either wider than ``max_local_extent`` in their local windows (no drone
-    as a whole) or wider than ``min_extent`` (default ``split_min_extent``; streaming
-    passes ``stream_split_min_extent``) and below ``min_confidence`` (birds 2-3 m from
-    the drone make a cluster narrow enough to pass the extent gate, which then fails on
-    its smoothness), or, with ``excess_residual`` > 0, below ``min_confidence`` with a
-    larger excess residual, however narrow (a bird's returns joined to a drone's
-    track, offline's ``split_excess_residual``, deviation 74; streaming's
-    ``stream_split_excess_residual`` only for clusters of at least ``excess_min_points``
-    points, deviation 92)."""
+    """Indices of the clusters to split: flying (:func:`_flying`; ``high``: each
+    cluster's returns at least ``min_centroid_z`` high), with at least twice
+    ``min_cluster_points`` and at most ``max_cluster_points`` points, and either wider
+    than ``max_local_extent`` in their local windows (no drone as a whole) or wider
+    than ``min_extent`` (default ``split_min_extent``; streaming passes
+    ``stream_split_min_extent``) and below ``min_confidence`` (birds 2-3 m from the
+    drone make a cluster narrow enough to pass the extent gate, which then fails on its
+    smoothness), or, with ``excess_residual`` > 0, below ``min_confidence`` with a
+    larger excess residual, however narrow (a bird's returns joined to a drone's track,
+    offline's ``split_excess_residual``, deviation 74; streaming's
+    ``stream_split_excess_residual`` only for clusters of at least
+    ``excess_min_points`` points, deviation 92)."""
     if min_extent is None:
         min_extent = params.split_min_extent
     wide = scores.local_extent > params.max_local_extent
@@ -285,17 +287,28 @@ def merged_clusters(
             & (scores.confidence < params.min_confidence)
             & (scores.n_points >= excess_min_points)
         )
-    return np.nonzero(wide & _flying(scores, params))[0]
+    return np.nonzero(wide & _flying(scores, params, high))[0]
 
 
-def _flying(scores: ClusterScores, params: ParamSet) -> np.ndarray:
-    """(K,) bool: clusters that may be split: centroid at least ``min_centroid_z`` high,
-    at least twice ``min_cluster_points`` and at most ``max_cluster_points`` points."""
+def _flying(scores: ClusterScores, params: ParamSet, high: np.ndarray | None = None) -> np.ndarray:
+    """(K,) bool: clusters that may be split: centroid at least ``min_centroid_z`` high
+    or, with ``split_low_flying`` and ``high`` (each cluster's returns at least that
+    high), at least twice ``min_cluster_points`` such returns (deviation 118); at least
+    twice ``min_cluster_points`` and at most ``max_cluster_points`` points."""
+    flying = scores.centroid[:, 2] >= params.min_centroid_z
+    if high is not None and params.split_low_flying:
+        flying |= high[: flying.size] >= 2 * params.min_cluster_points
     return (
-        (scores.centroid[:, 2] >= params.min_centroid_z)
+        flying
         & (scores.n_points >= 2 * params.min_cluster_points)
         & (scores.n_points <= params.max_cluster_points)
     )
+
+
+def _high_points(labels: np.ndarray, xyz: np.ndarray, k: int, params: ParamSet) -> np.ndarray:
+    """(K,) each cluster's returns at least ``min_centroid_z`` high."""
+    high = (labels >= 0) & (xyz[:, 2] >= params.min_centroid_z)
+    return np.bincount(labels[high], minlength=k)
 
 
 def split_merged(
@@ -324,8 +337,9 @@ def split_merged(
     K, (N,) bool mask of the points that were in a split cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
-    split = merged_clusters(scores, params, min_extent, excess_residual, excess_min_points)
     k = int(labels.max()) + 1 if labels.size else 0
+    high = _high_points(labels, xyz, k, params)
+    split = merged_clusters(scores, params, min_extent, excess_residual, excess_min_points, high)
     if also is not None and len(also):
         split = np.union1d(split, np.asarray(also, dtype=split.dtype))
     if among is not None:
@@ -395,7 +409,11 @@ def split_and_score(
     )
     also = None
     if apart > 0:
-        merged = merged_clusters(scores, params, min_extent, excess_residual, excess_min_points)
+        k = int(labels.max()) + 1 if labels.size else 0
+        high = _high_points(np.asarray(labels, dtype=np.int64), xyz, k, params)
+        merged = merged_clusters(
+            scores, params, min_extent, excess_residual, excess_min_points, high
+        )
         also = crossed_clusters(labels, xyz, t, scores, params, apart, merged)
     out, k, was_split = split_merged(*args, also=also, among=among)
     pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)

@@ -622,3 +622,38 @@ def test_split_merged_among_splits_only_the_clusters_given():
     out, k, was = split_merged(labels, both, tt, scores, params, among=np.array([1]))
     assert not was[labels == 0].any() and was[labels == 1].all()
     assert np.unique(out[labels == 0]).size == 1 and np.unique(out[labels == 1]).size >= 2
+
+
+def test_a_drone_flying_low_over_a_person_is_split_from_the_persons_cluster():
+    # fast_pass 5405 of the fifty-third set: the drone flew 2 m above a person's head
+    # and their returns made one cluster, whose centroid (0.9 m) failed min_centroid_z;
+    # it was gated out whole, and offline reported nothing (deviation 118).
+    params = detector_params()
+    ts = np.round(np.arange(0.0, 6.0, 0.1), 6)
+    rng = np.random.default_rng(3)
+    drone_t = np.repeat(ts, 3)
+    drone = np.column_stack(
+        [-12.0 + 4.0 * drone_t, np.full(drone_t.size, 5.0), np.full(drone_t.size, 2.5)]
+    ) + rng.normal(0.0, 0.05, (drone_t.size, 3))
+    person_t = np.repeat(ts, 8)
+    person = np.column_stack(
+        [1.2 * person_t, np.full(person_t.size, 5.0), np.full(person_t.size, 0.05)]
+    ) + rng.normal(0.0, 0.1, (person_t.size, 3))
+    xyz = np.vstack([drone, person])
+    t = np.concatenate([drone_t, person_t])
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    assert scores.centroid[0, 2] < params.min_centroid_z
+    assert scores.local_extent[0] > params.max_local_extent
+    high = splitting._high_points(labels, xyz, 1, params)
+    assert high[0] == drone_t.size
+    assert list(merged_clusters(scores, params, high=high)) == [0]
+    assert merged_clusters(scores, params.copy(split_low_flying=False), high=high).size == 0
+    out, k, was_split = split_merged(labels, xyz, t, scores, params)
+    assert was_split.all()
+    after = score_clusters(out, xyz, t, params, n_clusters=k)
+    piece = np.bincount(out[: drone_t.size]).argmax()
+    assert np.mean(out[: drone_t.size] == piece) > 0.9
+    assert after.candidate[piece] and after.confidence[piece] >= params.min_confidence
+    same, _, none_split = split_merged(labels, xyz, t, scores, params.copy(split_low_flying=False))
+    assert not none_split.any() and (same == labels).all()
