@@ -1128,8 +1128,10 @@ class StreamingDetector:
 
     def _extend_track(self, stamp: float, xyz: np.ndarray, t: np.ndarray) -> None:
         """Append the frame's points within ``track_gate`` of the track's predicted
-        position. Association outlives reporting: a return up to ``max_gap`` after the
-        track's newest one continues it, although nothing was reported in between."""
+        position; for a track at least ``min_speed`` fast, only those chained within
+        ``track_join_link`` to the one nearest it (:func:`_nearest_group`, deviation 116).
+        Association outlives reporting: a return up to ``max_gap`` after the track's
+        newest one continues it, although nothing was reported in between."""
         p = self.params
         pred = self._predict(stamp)
         if pred is None:
@@ -1713,14 +1715,16 @@ def _track_samples(
     params: ParamSet,
     reported: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[_TrackSample]:
-    """A track from the points in ``mask``: one sample per half frame period, skipping a
-    sample that no object could have reached from the sample kept before it (deviation
-    39), and, within ``track_window`` of the newest return, one off the path of the
-    samples kept before it (:func:`_on_own_path`, deviation 60). With ``reported`` (the
-    reported track's sample times and positions, stream_track_agree), when the new
-    samples hold some of the reported track's own, one that lies more than
-    ``track_gate`` from where the reported track was at its time (between two of its
-    samples at most ``link_max_gap`` apart) is another object's (deviation 115)."""
+    """A track from the points in ``mask``: one sample per half frame period (of a half
+    frame whose returns span more than ``track_join_link``, its largest group,
+    :func:`_main_group`, deviation 116), skipping a sample that no object could have
+    reached from the sample kept before it (deviation 39), and, within
+    ``track_window`` of the newest return, one off the path of the samples kept before
+    it (:func:`_on_own_path`, deviation 60). With ``reported`` (the reported track's
+    sample times and positions, stream_track_agree), when the new samples hold some of
+    the reported track's own, one that lies more than ``track_gate`` from where the
+    reported track was at its time (between two of its samples at most
+    ``link_max_gap`` apart) is another object's (deviation 115)."""
     pts, tt = xyz[mask], t[mask]
     if tt.size == 0:
         return []
