@@ -1138,7 +1138,8 @@ class StreamingDetector:
             return
         predicted, _, age, velocity, _ = pred
         limit = max(p.max_extrapolation, p.max_gap)
-        if float(np.linalg.norm(velocity)) < p.min_speed:
+        moving = float(np.linalg.norm(velocity)) >= p.min_speed
+        if not moving:
             # A hovering drone seen once every second or two is still where it was.
             limit = max(limit, p.reacquire_window)
         if age > limit:
@@ -1147,7 +1148,7 @@ class StreamingDetector:
         d2 = np.sum((xyz.astype(np.float64) - predicted) ** 2, axis=1)
         near = np.flatnonzero(d2 <= gate**2)
         if near.size:
-            if float(np.linalg.norm(velocity)) >= p.min_speed:
+            if moving:
                 near = near[_nearest_group(xyz[near], d2[near], p.track_join_link)]
             group = xyz[near]
             self._track.append(
@@ -1789,12 +1790,9 @@ def _nearest_group(points: np.ndarray, d2: np.ndarray, link: float) -> np.ndarra
 
 
 def _main_group(points: np.ndarray, link: float, near: np.ndarray | None) -> np.ndarray:
-    """Indices of the largest group of ``points`` chained by steps of at most ``link``;
-    of equal ones, the one whose mean is nearest ``near`` (if given); all of them when
-    they span no more than ``link`` (deviation 116)."""
-    n = points.shape[0]
-    if n == 1 or link <= 0.0 or float(np.linalg.norm(np.ptp(points, axis=0))) <= link:
-        return np.arange(n)
+    """Indices of the largest group of ``points`` chained by steps of at most ``link``
+    (> 0); of equal ones, the one whose mean is nearest ``near`` (if given); deviation
+    116. :func:`_track_samples` calls it only for half frames wider than ``link``."""
     labels = _linked_components(points, link)
     ids, sizes = np.unique(labels, return_counts=True)
     best = ids[sizes == sizes.max()]
