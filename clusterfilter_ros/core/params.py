@@ -797,7 +797,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "recent returns fails keep_confidence, it is split into kinematic tracks; the one "
         "holding the recent returns near the track's predicted position continues the "
         "track if it also holds those near its newest sample, begins with the track "
-        "(within track_window) and alone passes keep_confidence: another object that "
+        "(within track_window, or with at most a fifth of the track's samples before it: "
+        "a bird's few returns began the drone's cluster) and alone passes keep_confidence: "
+        "another object that "
         "joined the drone's cluster without making it wide or rough enough to be split "
         "as merged. false = the track is given up.",
     ),

@@ -347,8 +347,8 @@ class _HistorySnapshot:
     params: ParamSet
     # Time of the reported track's oldest sample, with ``expected``.
     track_from: float | None = None
-    # stream_track_agree: (times (S,), positions (S, 3)) of the reported track's
-    # samples, with ``expected``.
+    # (times (S,), positions (S, 3)) of the reported track's samples, with ``expected``
+    # (stream_track_agree, and stream_split_track's share before the piece).
     track_path: tuple[np.ndarray, np.ndarray] | None = None
 
 
@@ -741,7 +741,7 @@ class StreamingDetector:
             params=p,
             track_from=None if expected is None or not self._track else self._track[0].t,
             track_path=None
-            if expected is None or not self._track or not p.stream_track_agree
+            if expected is None or not self._track
             else _sample_arrays(self._track)[:2],
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
@@ -1581,7 +1581,8 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     def choice(
         mask: np.ndarray | None, confidence: float, new: bool, k: int, coast: bool = False
     ) -> _TrackChoice:
-        samples = None if mask is None else _track_samples(mask, xyz, t, p, snap.track_path)
+        reported = snap.track_path if p.stream_track_agree else None
+        samples = None if mask is None else _track_samples(mask, xyz, t, p, reported)
         head: tuple[_TrackSample, ...] = ()
         tail: tuple[_TrackSample, ...] = ()
         inner: tuple[_TrackSample, ...] = ()
@@ -2066,7 +2067,8 @@ def _split_track(
     ``c`` that continues the reported track (``snap``): it holds most of the cluster's
     returns of the last ``track_window`` near the track's expected position, and most of
     those near its newest sample in the ``track_window`` before that, begins within
-    ``track_window`` of its oldest sample, and alone is a candidate with
+    ``track_window`` of its oldest sample or with at most :data:`_SPLIT_OLDER_SHARE` of
+    the track's samples before it (:func:`_few_before`), and alone is a candidate with
     ``keep_confidence``. For a reported drone's cluster that another object joined,
     too narrow and smooth for the split of merged clusters (deviation 111); else None."""
     if snap.expected is None or snap.newest is None or snap.track_from is None:
@@ -2087,7 +2089,10 @@ def _split_track(
     # (or to the cluster's first, if the history holds less).
     t_last, position = snap.newest
     own = _track_cluster(position, params.track_gate, pieces, xm, tm, t_last - window, t_last)
-    if own != piece or tm[pieces == piece].min() > max(snap.track_from, tm.min()) + window:
+    if own != piece:
+        return None
+    begins = float(tm[pieces == piece].min())
+    if begins > max(snap.track_from, tm.min()) + window and not _few_before(snap, begins - window):
         return None
     scores = scorer(pieces, xm, tm, params, n_clusters=n)
     if not (scores.candidate[piece] and scores.confidence[piece] >= params.keep_confidence):
@@ -2095,6 +2100,21 @@ def _split_track(
     mask = np.zeros(labels.size, dtype=bool)
     mask[member[pieces == piece]] = True
     return mask
+
+
+#: Largest share of the reported track's samples that may lie before the start of the
+#: piece continuing it (:func:`_split_track`, deviation 119).
+_SPLIT_OLDER_SHARE = 0.2
+
+
+def _few_before(snap: _HistorySnapshot, before: float) -> bool:
+    """Whether at most :data:`_SPLIT_OLDER_SHARE` of the reported track's samples
+    (``snap.track_path``) are older than ``before``: a bird's few returns at the start of
+    the drone's cluster, not the drone's own older part."""
+    if snap.track_path is None or _SPLIT_OLDER_SHARE <= 0:
+        return False
+    times = snap.track_path[0]
+    return bool(times.size) and np.count_nonzero(times < before) <= _SPLIT_OLDER_SHARE * times.size
 
 
 def _hovering_track(

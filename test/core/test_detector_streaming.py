@@ -1051,6 +1051,7 @@ def test_a_reported_tracks_cluster_joined_by_a_bird_keeps_the_drones_piece():
         newest=(5.9, drone[-1]),
         now=6.0,
         track_from=0.0,
+        track_path=None,
     )
     mask = _split_track(0, labels, xyz, t, snap, scorer, ps)
     assert mask is not None and np.array_equal(mask, is_drone)
@@ -1067,6 +1068,53 @@ def test_a_reported_tracks_cluster_joined_by_a_bird_keeps_the_drones_piece():
     moved = xyz + np.where((t < 3.0) & is_drone, 6.0, 0.0)[:, None] * [0.0, 1.0, 0.0]
     assert _split_track(0, labels, moved, t, snap, scorer, ps) is None
     assert _split_track(0, labels, moved, t, older, scorer, ps) is None
+    # Deviation 119: also when the reported track's samples are known, half of them lie
+    # before the piece begins.
+    path = types.SimpleNamespace(**{**vars(snap), "track_path": (stamps, drone)})
+    assert _split_track(0, labels, moved, t, path, scorer, ps) is None
+
+
+def test_a_bird_at_the_start_of_a_reported_tracks_cluster_does_not_end_the_track():
+    # Deviation 119 (take-off 5501 of the fifty-fourth set): a bird's five returns, 8 m
+    # off, began the cluster 1.4 s before the drone's one return a frame. The whole
+    # fails keep_confidence; the drone's piece begins 1.4 s after the track's oldest
+    # sample, the bird's, and continues the track all the same: the bird holds less
+    # than a fifth of the track's samples.
+    p = detector_params()
+    ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
+    rng = np.random.default_rng(2)
+    stamps = np.round(np.arange(1.4, 8.0, 0.1), 2)
+    drone = np.stack(
+        [20.0 - 4.0 * stamps, np.full_like(stamps, 20.0), np.full_like(stamps, 12.0)], 1
+    )
+    early = np.array([0.0, 0.3, 0.6, 0.9, 1.2])
+    bird = np.stack([18.0 - 4.0 * early, np.full_like(early, 28.0), 13.0 + early], 1)
+    xyz = np.concatenate([drone, bird]) + rng.normal(0, 0.05, (stamps.size + early.size, 3))
+    t = np.concatenate([stamps, early])
+    is_drone = np.arange(t.size) < stamps.size
+    labels = np.zeros(t.size, np.int64)
+    scorer = functools.partial(
+        score_clusters, t0=0.0, coherence_origin=0.0, min_track_seconds=p.stream_min_track_seconds
+    )
+    assert scorer(labels, xyz, t, ps, n_clusters=1).confidence[0] < p.keep_confidence
+    samples = np.concatenate([early, stamps])
+    positions = np.concatenate([bird, drone])
+    snap = types.SimpleNamespace(
+        expected=(drone[-1] + [-0.4, 0.0, 0.0], p.track_gate),
+        newest=(float(stamps[-1]), drone[-1]),
+        now=8.0,
+        track_from=0.0,
+        track_path=(samples, positions),
+    )
+    mask = _split_track(0, labels, xyz, t, snap, scorer, ps)
+    assert mask is not None and np.array_equal(mask, is_drone)
+    # Without the track's samples, or with more than a fifth of them before the piece,
+    # the piece beginning 1.4 s after the track is not taken for its continuation.
+    unknown = types.SimpleNamespace(**{**vars(snap), "track_path": None})
+    assert _split_track(0, labels, xyz, t, unknown, scorer, ps) is None
+    longer = np.concatenate([np.arange(-3.0, 0.0, 0.1), samples])
+    many = types.SimpleNamespace(**{**vars(snap), "track_path": (longer, positions)})
+    assert _split_track(0, labels, xyz, t, many, scorer, ps) is None
 
 
 def _drone_then_bird() -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
