@@ -136,13 +136,26 @@ class Trajectory:
         return (self.segments[0].t_start, self.segments[-1].t_end)
 
     def segment_index(self, stamps: np.ndarray) -> np.ndarray:
-        """Index of the segment supporting each stamp, -1 where none does."""
+        """Index of the segment supporting each stamp, -1 where none does. Where segments
+        overlap (two selected clusters at once), one whose own span holds the stamp goes
+        before one that only extrapolates to it, and of those alike the longer one, then
+        the earlier one: a flight's track outlasts a bird's leg (deviation 120)."""
         stamps = np.asarray(stamps, dtype=np.float64).reshape(-1)
         out = np.full(stamps.size, -1, dtype=np.int64)
+        if not self.segments:
+            return out
         m = self.max_extrapolation
+        spans = np.array([seg.t_end - seg.t_start for seg in self.segments])
+        # Holding the stamp counts 2; the span adds less than 1 (equal spans: the first).
+        length = spans / (float(spans.max()) + 1.0)
+        best = np.full(stamps.size, -np.inf)
         for i, seg in enumerate(self.segments):
-            inside = (stamps >= seg.t_start - m) & (stamps <= seg.t_end + m) & (out < 0)
-            out[inside] = i
+            near = (stamps >= seg.t_start - m) & (stamps <= seg.t_end + m)
+            within = (stamps >= seg.t_start) & (stamps <= seg.t_end)
+            rank = np.where(within, 2.0, 0.0) + length[i]
+            take = near & (rank > best)
+            out[take] = i
+            best[take] = rank[take]
         return out
 
     def __call__(self, stamps: np.ndarray) -> np.ndarray:

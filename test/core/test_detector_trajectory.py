@@ -7,6 +7,7 @@ import pytest
 
 from clusterfilter_ros.core.trajectory import (
     fit_trajectory,
+    merge_trajectories,
     time_samples,
     weighted_line,
     weighted_quadratic,
@@ -234,3 +235,31 @@ def test_a_constant_confidence_is_kept_exactly(n_samples):
     assert traj is not None
     assert all(seg.confidence == 0.6 for seg in traj.segments)
     assert (traj.confidence(t) >= 0.6).all()
+
+
+def test_overlapping_segments_prefer_the_one_holding_the_stamp_then_the_longer():
+    # Deviation 120: two selected clusters at once. A bird's leg (8 s, 0-8 s) and the
+    # drone's track (10 s, 5-15 s) overlap for 3 s: there the longer track is taken, not
+    # the one that began first, whatever their confidences. Outside the overlap, a
+    # segment's own span goes before the other's extrapolation.
+    t_bird = np.arange(0.0, 8.0, 0.1)
+    t_drone = np.arange(5.0, 15.0, 0.1)
+    bird = np.column_stack([t_bird, np.full_like(t_bird, 10.0), np.full_like(t_bird, 8.0)])
+    drone = np.column_stack([-t_drone, np.zeros_like(t_drone), np.full_like(t_drone, 4.0)])
+    kw = dict(max_gap=1.0, max_extrapolation=0.5)
+    parts = [
+        fit_trajectory(t_bird, bird, confidence=np.full(t_bird.size, 0.9), **kw),
+        fit_trajectory(t_drone, drone, confidence=np.full(t_drone.size, 0.6), **kw),
+    ]
+    traj = merge_trajectories(parts, 0.5)
+    pos = traj(np.array([2.0, 6.0, 7.9, 8.2]))
+    assert np.allclose(pos[0], [2.0, 10.0, 8.0], atol=0.05)  # the bird alone
+    assert np.allclose(pos[1:, 1], 0.0, atol=0.05)  # the drone where both are, and after
+    # 0.2 s before the drone's first return: the bird's own span, not the drone's
+    # extrapolation.
+    assert np.allclose(traj(np.array([4.8]))[0, 1], 10.0, atol=0.05)
+    # Spans alike: the earlier segment, as before.
+    t_same = np.arange(5.0, 13.0, 0.1)
+    same = np.column_stack([-t_same, np.zeros_like(t_same), np.full_like(t_same, 4.0)])
+    alike = [parts[0], fit_trajectory(t_same, same, **kw)]
+    assert np.allclose(merge_trajectories(alike, 0.5)(np.array([6.0]))[0, 1], 10.0, atol=0.05)
