@@ -96,7 +96,7 @@ def frame_sample_ids(labels: np.ndarray, t: np.ndarray, frame_period: float) -> 
     return ids
 
 
-def _frame_samples(
+def frame_samples(
     labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, k: int, frame_period: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per (cluster, frame) mean: cluster id, time, position, point count, bbox side.
@@ -314,7 +314,7 @@ def link_fragments(
     # others' points change nothing): large or low clusters, often most of the points, are
     # left out before the sort.
     sub = np.flatnonzero(candidate[lab])
-    cid, ts, ps, w, side = _frame_samples(lab[sub], pts[sub], tt[sub], k, fp)
+    cid, ts, ps, w, side = frame_samples(lab[sub], pts[sub], tt[sub], k, fp)
     n_frames = np.bincount(cid, minlength=k)
     mean_side = np.bincount(cid, weights=side, minlength=k) / np.maximum(n_frames, 1)
     eligible = candidate & (mean_side <= params.max_local_extent)
@@ -426,7 +426,7 @@ def _end_state(
     span = max(float(params.link_fit_window), float(params.link_max_gap))
     sel = np.abs(t - edge) <= span
     zeros = np.zeros(int(np.count_nonzero(sel)), dtype=np.int64)
-    cid, ts, ps, w, _ = _frame_samples(zeros, xyz[sel], t[sel], 1, float(params.frame_period))
+    cid, ts, ps, w, _ = frame_samples(zeros, xyz[sel], t[sel], 1, float(params.frame_period))
     ((t_first, t_last),) = group_bounds(cid, 1, ts)
     at_edge = int(np.argmax(ts) if forward else np.argmin(ts))
     in_sky = np.array([ps[at_edge, 2] >= params.min_centroid_z])
@@ -644,7 +644,7 @@ def _stray_end_points(
     is a stray end (:func:`_stray_ends`)."""
     m = np.nonzero(member)[0]
     ids = frame_sample_ids(np.zeros(m.size, np.int64), t[m], float(params.frame_period))
-    cid, ts, ps, w, _ = _frame_samples(
+    cid, ts, ps, w, _ = frame_samples(
         np.zeros(m.size, np.int64), xyz[m], t[m], 1, float(params.frame_period)
     )
     stray = np.zeros(member.size, dtype=bool)
@@ -678,7 +678,7 @@ def fill_track(
         return member
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
     t = np.asarray(t, dtype=np.float64)
-    _, ts, ps, _, _ = _frame_samples(
+    _, ts, ps, _, _ = frame_samples(
         np.zeros(m.size, np.int64), xyz[m], t[m], 1, float(params.frame_period)
     )
     idx = np.nonzero(pool & (t > ts[0]) & (t < ts[-1]))[0]

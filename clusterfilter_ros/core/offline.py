@@ -48,6 +48,7 @@ from clusterfilter_ros.core.linking import (
     chains_formed,
     extend_track,
     fill_track,
+    frame_samples,
     link_fragments,
     linking_reach,
 )
@@ -229,6 +230,7 @@ def select_trimmed(
     selected: list[int],
     params: ParamSet,
     was_split: np.ndarray | None = None,
+    xyz: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[int], np.ndarray]:
     """Selected clusters plus the qualifying candidates that :func:`select_clusters` left
     out for overlapping a selected one in time, each trimmed to its points outside the
@@ -246,6 +248,10 @@ def select_trimmed(
     is selected and the earlier one, seconds of drone before the swap, was dropped; or
     the earlier one is selected, goes on along the bird, and the drone's next piece is
     left with a rest of 2-4 s (deviation 79).
+    With ``xyz`` (the points' positions), a candidate seen at the same moments as a
+    cluster already taken and never within :data:`APART_OBJECTS` of it
+    (:func:`_elsewhere`) is another object flying at the same time, and is not added
+    (deviation 121): a bird's leg 40 m from the drone's pass, which began before it.
     Returns (labels with the trimmed points set to -1, selected clusters best first,
     mask of the trimmed points).
     """
@@ -268,6 +274,10 @@ def select_trimmed(
         if c in chosen:
             continue
         member = np.nonzero(labels == c)[0]
+        if xyz is not None and any(
+            _elsewhere(member, np.nonzero(labels == j)[0], xyz, t, params) for j in chosen
+        ):
+            continue
         covered = np.zeros(member.size, dtype=bool)
         for first, last in spans:
             covered |= (t[member] >= first) & (t[member] <= last)
@@ -282,6 +292,39 @@ def select_trimmed(
         chosen.append(c)
         spans += occupied_spans(t[rest], gap)
     return labels, chosen, trimmed
+
+
+#: Two tracks seen at the same moments, never closer than this (m), are two objects
+#: (deviation 121; birds circling the drone come within a few metres of it).
+APART_OBJECTS = 10.0
+#: Moments (frame samples of one track with one of the other within two frame periods)
+#: that make two tracks simultaneous for :func:`_elsewhere`.
+APART_MIN_MOMENTS = 3
+
+
+def _elsewhere(
+    first: np.ndarray, second: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+) -> bool:
+    """Whether the points ``first`` and ``second`` (indices into ``xyz``, ``t``) are two
+    objects seen at the same time: at least :data:`APART_MIN_MOMENTS` of the frame
+    samples of ``first`` have one of ``second`` within two frame periods, and every such
+    pair lies more than :data:`APART_OBJECTS` apart."""
+    if first.size == 0 or second.size == 0:
+        return False
+    fp = float(params.frame_period)
+    idx = np.concatenate([first, second])
+    which = np.repeat([0, 1], [first.size, second.size])
+    cid, ts, ps, _, _ = frame_samples(which, xyz[idx], t[idx], 2, fp)
+    ta, pa = ts[cid == 0], ps[cid == 0]
+    tb, pb = ts[cid == 1], ps[cid == 1]
+    # The nearest sample of the second in time to each of the first's (both sorted).
+    k = np.searchsorted(tb, ta)
+    before, after = np.clip(k - 1, 0, tb.size - 1), np.clip(k, 0, tb.size - 1)
+    near = np.where(np.abs(tb[before] - ta) <= np.abs(tb[after] - ta), before, after)
+    moments = np.abs(tb[near] - ta) <= 2.0 * fp
+    if np.count_nonzero(moments) < APART_MIN_MOMENTS:
+        return False
+    return bool(np.linalg.norm(pa[moments] - pb[near[moments]], axis=1).min() > APART_OBJECTS)
 
 
 def occupied_spans(t: np.ndarray, max_gap: float) -> list[tuple[float, float]]:
@@ -741,7 +784,7 @@ def detect_offline(
         was_split = cut if was_split is None else was_split | cut
     spans = tracked_spans(labels, xyz, t, scores, params)
     whole = select_clusters(spans, params)
-    labels, selected, trimmed = select_trimmed(labels, t, spans, whole, params, was_split)
+    labels, selected, trimmed = select_trimmed(labels, t, spans, whole, params, was_split, xyz=xyz)
     selected = reachable_pieces(
         labels, xyz, t, selected, params, frozenset(selected) - frozenset(whole)
     )

@@ -138,6 +138,40 @@ def test_a_candidate_overlapping_the_selected_one_is_kept_outside_its_span():
     assert np.array_equal(out[labels == 1], labels[labels == 1])
 
 
+def test_a_candidate_seen_far_from_the_selected_track_at_the_same_moments_is_left_out():
+    # Deviation 121 (fast_pass 5500 of the fifty-fourth set): the two tracks overlap for
+    # 2 s, 30 m apart all that time; the candidate is another object flying then, and
+    # its 8 s before the selected track are not reported either.
+    labels, t, scores, params = _two_overlapping_tracks()
+    xyz = _two_overlapping_positions(labels, t, 30.0)
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], params, xyz=xyz)
+    assert chosen == [1] and not trimmed.any() and np.array_equal(out, labels)
+    # Crossing the selected track's path within 10 m at some moment (a bird swapped
+    # onto the drone's track, deviation 79), it keeps its rest as before.
+    near = _two_overlapping_positions(labels, t, 30.0, crossing=9.0)
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], params, xyz=near)
+    assert chosen == [1, 0] and trimmed.any()
+    # Seen within two frame periods of each other at fewer than three moments (the
+    # selected track from 10 s, the candidate's last returns at 9.8 and 9.9 s): nothing
+    # tells them apart, and the candidate is kept.
+    few = (labels == 0) | (t >= 9.95)
+    idx = np.flatnonzero(few)
+    out, chosen, _ = select_trimmed(labels[idx], t[idx], scores, [1], params, xyz=xyz[idx])
+    assert chosen == [1, 0]
+
+
+def _two_overlapping_positions(
+    labels: np.ndarray, t: np.ndarray, apart: float, crossing: float | None = None
+) -> np.ndarray:
+    """Positions for :func:`_two_overlapping_tracks`' clusters: cluster 0 along x at y 0,
+    cluster 1 ``apart`` m away in y; with ``crossing``, cluster 0 swings to that distance
+    from cluster 1 at 9 s."""
+    y = np.where(labels == 1, apart, 0.0)
+    if crossing is not None:
+        y = np.where((labels == 0) & (np.abs(t - 9.0) < 0.15), apart - crossing, y)
+    return np.stack([t, y, np.full_like(t, 20.0)], axis=1).astype(np.float32)
+
+
 def test_a_trimmed_rest_must_be_a_confirmed_track_and_paper_mode_keeps_one():
     labels, t, scores, params = _two_overlapping_tracks()
     # 8 s of rest is shorter than a 9 s confirmation: nothing is added.

@@ -360,7 +360,7 @@ def test_later_linking_rounds_join_chains_by_their_own_end_states():
 
 
 def test_frame_samples_follow_the_gaps_between_returns_not_a_time_grid():
-    from clusterfilter_ros.core.linking import _frame_samples
+    from clusterfilter_ros.core.linking import frame_samples
 
     # Cluster 0: one sweep per frame, the two lidars 5 ms apart, each sweep's returns
     # spread over 20 ms. Cluster 1: a run of returns every 20 ms for 0.35 s.
@@ -369,7 +369,7 @@ def test_frame_samples_follow_the_gaps_between_returns_not_a_time_grid():
     t = np.concatenate([sweeps, run])
     lab = np.concatenate([np.zeros(sweeps.size, int), np.ones(run.size, int)])
     xyz = np.column_stack([t * 5.0, np.zeros_like(t), np.full_like(t, 20.0)])
-    cid, ts, _, n, _ = _frame_samples(lab, xyz, t, 2, 0.1)
+    cid, ts, _, n, _ = frame_samples(lab, xyz, t, 2, 0.1)
     assert cid.tolist() == [0, 0, 0, 1, 1, 1, 1]
     assert n.tolist() == [4, 4, 4, 5, 5, 5, 3]
     assert np.all(np.diff(ts[:3]) > 0) and np.all(np.diff(ts[3:]) > 0)
@@ -378,7 +378,7 @@ def test_frame_samples_follow_the_gaps_between_returns_not_a_time_grid():
     extra_t = np.concatenate([[t.min() - 0.0437], t])
     extra_lab = np.concatenate([[2], lab])
     extra_xyz = np.vstack([[[50.0, 50.0, 0.0]], xyz])
-    cid2, ts2, _, n2, _ = _frame_samples(extra_lab, extra_xyz, extra_t, 3, 0.1)
+    cid2, ts2, _, n2, _ = frame_samples(extra_lab, extra_xyz, extra_t, 3, 0.1)
     keep = cid2 < 2
     assert cid2[keep].tolist() == cid.tolist() and n2[keep].tolist() == n.tolist()
     assert np.allclose(ts2[keep], ts)
