@@ -249,7 +249,7 @@ def select_trimmed(
     the earlier one is selected, goes on along the bird, and the drone's next piece is
     left with a rest of 2-4 s (deviation 79).
     With ``xyz`` (the points' positions), a candidate seen at the same moments as a
-    cluster already taken and never within :data:`APART_OBJECTS` of it
+    cluster of ``selected`` and never within :data:`APART_OBJECTS` of it
     (:func:`_elsewhere`) is another object flying at the same time, and is not added
     (deviation 121): a bird's leg 40 m from the drone's pass, which began before it.
     Returns (labels with the trimmed points set to -1, selected clusters best first,
@@ -274,8 +274,9 @@ def select_trimmed(
         if c in chosen:
             continue
         member = np.nonzero(labels == c)[0]
+        # Judged against the tracks selected whole (the rests added here rank lower).
         if xyz is not None and any(
-            _elsewhere(member, np.nonzero(labels == j)[0], xyz, t, params) for j in chosen
+            _elsewhere(member, np.nonzero(labels == j)[0], xyz, t, params) for j in selected
         ):
             continue
         covered = np.zeros(member.size, dtype=bool)
