@@ -268,16 +268,16 @@ def select_trimmed(
     for c in chosen:
         tc = t[labels == c]
         spans += occupied_spans(tc[(tc >= scores.t_first[c]) & (tc <= scores.t_last[c])], gap)
+    # Candidates are judged against the tracks selected whole (the rests added here rank
+    # lower); the loop below relabels only candidates' points, so these stay as they are.
+    whole = [np.nonzero(labels == j)[0] for j in selected] if xyz is not None else []
     order = np.argsort(-rank, kind="stable")
     for c in order[qualifies[order]]:
         c = int(c)
         if c in chosen:
             continue
         member = np.nonzero(labels == c)[0]
-        # Judged against the tracks selected whole (the rests added here rank lower).
-        if xyz is not None and any(
-            _elsewhere(member, np.nonzero(labels == j)[0], xyz, t, params) for j in selected
-        ):
+        if any(_elsewhere(member, track, xyz, t, params) for track in whole):
             continue
         covered = np.zeros(member.size, dtype=bool)
         for first, last in spans:

@@ -2111,7 +2111,7 @@ def _few_before(snap: _HistorySnapshot, before: float) -> bool:
     """Whether at most :data:`_SPLIT_OLDER_SHARE` of the reported track's samples
     (``snap.track_path``) are older than ``before``: a bird's few returns at the start of
     the drone's cluster, not the drone's own older part."""
-    if snap.track_path is None or _SPLIT_OLDER_SHARE <= 0:
+    if snap.track_path is None:
         return False
     times = snap.track_path[0]
     return bool(times.size) and np.count_nonzero(times < before) <= _SPLIT_OLDER_SHARE * times.size
