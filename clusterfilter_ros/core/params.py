@@ -1326,11 +1326,24 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "report_lag: the late output also reports the reported track's later returns that "
         "the clustering left as noise or in clusters too small to score, found by growing "
         "the track forward in time as offline does (across gaps up to extend_max_gap, or "
-        "extend_hover_gap for a hovering end; not extend_far_gap), for the frames after "
+        "extend_hover_gap for a hovering end; extend_far_gap with report_extend_far), for "
+        "the frames after "
         "the track's cluster ends, once the live output has reported the track up to "
         "within max_gap of that end and over at least report_lag_min_run: a pass leaving "
         "the lidars gives a return or two a second. The live output does not use them; "
         "false = off.",
+    ),
+    ParamSpec(
+        "report_extend_far",
+        "bool",
+        True,
+        "report_lag: the late output's growth past the track's end (report_extend_tail) "
+        "also takes, as offline does, a lone return far out on the line of a pass leaving "
+        "the lidars up to extend_far_gap after the track's last; and where a gap longer "
+        "than max_gap, at most extend_far_gap (else link_max_gap), separates a track's "
+        "first or last samples from the rest, those samples, if they span no velocity of "
+        "their own, take the velocity of the chord across the gap (held still, an "
+        "estimate beside such a return was 2-4 m off the pass); false = neither.",
     ),
     ParamSpec(
         "report_fill",

@@ -898,7 +898,10 @@ class StreamingDetector:
                 return
             if not lo <= stamp <= hi:
                 continue
-            own = smoothed_position(piece.ts, piece.ps, piece.ws, stamp, p)
+            # Judged as the live output fits a track: past returns without a velocity of
+            # their own after a pause, it holds them still, where the late output follows
+            # the chord across the pause (deviation 122); the same track either way.
+            own = smoothed_position(piece.ts, piece.ps, piece.ws, stamp, p, chord_ends=False)
             if own is None:
                 continue
             if float(np.linalg.norm(reported_positions(own, p)[0] - position)) <= p.track_gate:
@@ -1888,28 +1891,31 @@ def _grown(
     # seconds there, whose line the growth starts from.
     if forward:
         end = float(t[mask].max())
-        sub = np.flatnonzero((pool & (t > end)) | (mask & (t >= end - span)))
+        grow, own = pool & (t > end), mask & (t >= end - span)
     else:
         end = float(t[mask].min())
-        sub = np.flatnonzero((pool & (t < end)) | (mask & (t <= end + span)))
-    if not pool[sub].any():
+        grow, own = pool & (t < end), mask & (t <= end + span)
+    if not grow.any():
         return ()
-    member = mask[sub]
-    # Not across the longer gaps offline takes toward a far lone return (extend_far_gap):
-    # on fast passes such a return was often something else's near the line, and the
-    # late output reported a second of it (the head, fast_pass, 212 runs the growth
+    # Toward a far lone return (extend_far_gap), the tail only (report_extend_far,
+    # deviation 122); the growth then also reads every other return, as offline's does,
+    # to tell whether something returned from that spot a second before or after it.
+    # Not the head: on fast passes such a return was often something else's near the
+    # line, and the late output reported a second of it (fast_pass, 212 runs the growth
     # changed: other objects 1.34% -> 0.27% of the time without it, detection 92.7% ->
-    # 92.2%; the tail, deviation 99: an estimate held at such a return 2-4 m off).
+    # 92.2%).
+    far = forward and params.report_extend_far
+    sub = slice(None) if far else np.flatnonzero(grow | own)
     grown = extend_track(
-        member,
+        own[sub],
         xyz[sub],
         t[sub],
-        pool[sub],
-        params.copy(extend_far_gap=0.0),
+        grow[sub],
+        params if far else params.copy(extend_far_gap=0.0),
         grow_end=forward,
         grow_start=not forward,
     )
-    new = grown & ~member
+    new = grown & ~own[sub]
     if not new.any():
         return ()
     samples = _track_samples(new, xyz[sub], t[sub], params)
@@ -2243,7 +2249,12 @@ def _without_strays(piece: _TrackPiece, params: ParamSet) -> _TrackPiece:
 
 
 def smoothed_position(
-    ts: np.ndarray, ps: np.ndarray, ws: np.ndarray, stamp: float, params: ParamSet
+    ts: np.ndarray,
+    ps: np.ndarray,
+    ws: np.ndarray,
+    stamp: float,
+    params: ParamSet,
+    chord_ends: bool = True,
 ) -> np.ndarray | None:
     """Position at ``stamp`` from track samples (times ``ts`` ascending, positions ``ps``
     (S, 3), point counts ``ws``) on both sides of it, or None where the samples do not
@@ -2256,17 +2267,24 @@ def smoothed_position(
     as standing still): a weighted quadratic where ``stamp`` lies among at least 6 samples
     spanning 0.6 s and the fitted acceleration is at most ``max_accel``, else a weighted
     straight line (no velocity over less than two frame periods; beside a gap of at most
-    ``link_max_gap``, such samples take the velocity of the chord across the gap)."""
+    ``link_max_gap``, such samples take the velocity of the chord across the gap). With
+    ``report_extend_far``, gaps up to ``extend_far_gap`` count too, and before the first
+    or after the last sample beside such a gap the fit is from that side, as inside it
+    (unless ``chord_ends`` is False)."""
     p = params
     n = ts.size
     if n == 0 or not ts[0] - p.max_extrapolation <= stamp <= ts[-1] + p.max_extrapolation:
         return None
     k = int(np.searchsorted(ts, stamp))
     across = None  # the velocity of the chord across a gap, where one side may need it
+    chord_gap = float(p.link_max_gap)
+    if p.report_extend_far:
+        # A far lone return the tail grew into is up to extend_far_gap beyond the rest.
+        chord_gap = max(chord_gap, float(p.extend_far_gap))
     if 0 < k < n and ts[k] - ts[k - 1] > p.max_gap:
         # Inside a gap too long to bridge: only near one of its ends, from that side.
         gap = float(ts[k] - ts[k - 1])
-        if gap <= p.link_max_gap:
+        if gap <= chord_gap:
             across = (ps[k] - ps[k - 1]) / gap
         if stamp - ts[k - 1] <= p.max_extrapolation:
             ts, ps, ws = ts[:k], ps[:k], ws[:k]
@@ -2274,6 +2292,21 @@ def smoothed_position(
             ts, ps, ws = ts[k:], ps[k:], ws[k:]
         else:
             return None
+    elif chord_ends and p.report_extend_far and n >= 2 and (k == 0 or k == n):
+        # Before the first sample or after the last, beside the track's first or last
+        # gap too long to bridge: from that side, as inside one (deviation 122; held
+        # still, a pass's lone last return gave estimates 2-4 m off within
+        # max_extrapolation of it).
+        long = np.flatnonzero(np.diff(ts) > p.max_gap)
+        if long.size:
+            j = int(long[-1] if k == n else long[0]) + 1
+            gap = float(ts[j] - ts[j - 1])
+            if gap <= chord_gap:
+                across = (ps[j] - ps[j - 1]) / gap
+                if k == n:
+                    ts, ps, ws = ts[j:], ps[j:], ws[j:]
+                else:
+                    ts, ps, ws = ts[:j], ps[:j], ws[:j]
     dist = np.abs(ts - stamp)
     near = dist <= p.track_window
     if np.count_nonzero(near) < 4:

@@ -592,11 +592,31 @@ def test_the_first_returns_after_a_pause_take_the_velocity_across_it():
         np.testing.assert_allclose(
             smoothed_position(ts, ps, w, stamp, P), _line(np.array([stamp]))[0], atol=1e-9
         )
-    # Across a pause longer than link_max_gap nothing says where the object went
+    # Across a pause longer than link_max_gap, and than extend_far_gap (3 s, which
+    # report_extend_far allows: a far lone return), nothing says where the object went
     # meanwhile: the samples are where it was.
-    ts[-2:] += 1.0
-    got = smoothed_position(ts, _line(ts), w, 4.2, P)
+    ts[-2:] += 2.0
+    got = smoothed_position(ts, _line(ts), w, 5.7, P)
     np.testing.assert_allclose(got, _line(ts[-2:]).mean(axis=0), atol=1e-9)
+
+
+@pytest.mark.parametrize("far", [True, False])
+def test_a_lone_last_return_seconds_after_the_rest_takes_the_velocity_across(far):
+    # A pass at 2.2 m/s, then 2.5 s without returns (beyond link_max_gap, within
+    # extend_far_gap) and two samples 0.05 s apart at its end: past them (deviation 122)
+    # and beside the first samples of a track that begins so, the chord's velocity.
+    # Without report_extend_far they are where they were.
+    params = P.copy(report_extend_far=far)
+    ts = np.concatenate([np.arange(0.0, 2.01, 0.1), [4.5, 4.55]])
+    w = np.ones(ts.size)
+    for stamp in (4.3, 4.8, 5.0):
+        got = smoothed_position(ts, _line(ts), w, stamp, params)
+        want = _line(np.array([stamp]))[0] if far else _line(ts[-2:]).mean(axis=0)
+        np.testing.assert_allclose(got, want, atol=1e-9)
+    first = ts[-1] + 0.05 - ts[::-1]  # the same in reverse: a track's first samples
+    got = smoothed_position(first, _line(first), w, -0.3, params)
+    want = _line(np.array([-0.3]))[0] if far else _line(first[:2]).mean(axis=0)
+    np.testing.assert_allclose(got, want, atol=1e-9)
 
 
 def test_a_sparse_track_is_not_read_as_standing_still():
@@ -1136,6 +1156,33 @@ def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(
         frames, {"report_lag": LAG, "report_backfill": 0.0}, "report_fill"
     )
     _assert_only_the_switched_run_fills_the_gap(runs, path)
+
+
+def test_the_late_output_follows_a_leaving_pass_to_a_lone_far_return(scene):
+    # The pass leaves the lidars: three returns a frame up to 7.5 s (39 m out, receding at
+    # 6.3 m/s), then one Mid360 return at 9.9 s, 58 m out on its line, 2.4 s later
+    # (beyond extend_max_gap, within extend_far_gap). With report_extend_far the late
+    # output's tail takes it as offline's growth does, and the estimates beside it take
+    # the velocity of the chord across the gap (deviation 122); without, the late output
+    # stops with the cluster.
+    frames, _, _ = scene(duration=12.0, wall_points=200, drone=False)
+
+    def returns(t, sensor):
+        if t > 7.5:
+            return int(sensor == MID360 and t == 9.9)
+        return 3
+
+    frames, path = _straight_pass(frames, returns)
+    runs, _ = _runs_with_and_without(
+        frames, {"report_lag": LAG, "report_backfill": 0.0}, "report_extend_far"
+    )
+    assert runs[False][0] == runs[True][0]  # the live output is the same
+    beside = {on: [e for e in late if e.stamp >= 1009.4] for on, (_, late) in runs.items()}
+    assert not beside[False]
+    assert len(beside[True]) >= 8
+    stamps = np.array([e.stamp for e in beside[True]])
+    pos = np.array([e.position for e in beside[True]])
+    assert np.linalg.norm(pos - path(stamps - 1000.0), axis=1).max() < 1.0
 
 
 def _runs_with_and_without(
