@@ -194,6 +194,7 @@ def cluster_trajectory(
         stray_speed=float(params.link_max_speed),
         stray_accel=float(params.link_max_accel),
         stray_window=float(params.link_fit_window),
+        stray_span=2.0 * float(params.frame_period),
     )
 
 

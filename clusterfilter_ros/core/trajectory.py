@@ -204,6 +204,7 @@ def fit_trajectory(
     stray_speed: float = 0.0,
     stray_accel: float = math.inf,
     stray_window: float = 1.0,
+    stray_span: float = 0.0,
 ) -> Trajectory | None:
     """Fit a :class:`Trajectory` to drone points (t (N,), xyz (N, 3)); None if no points.
 
@@ -228,6 +229,9 @@ def fit_trajectory(
     ``stray_distance`` + ``stray_accel`` x dt^2 / 2 from where the neighbouring
     ``stray_window`` seconds of samples were heading; and so is a segment of fewer than
     five samples that neither neighbouring segment could have reached that way.
+    ``stray_span`` (s, 0 = off): samples spanning less than this give no heading (two
+    returns 0.06 s apart give their scatter): the nearest further in join them until
+    they span it.
     """
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
@@ -238,7 +242,7 @@ def fit_trajectory(
     conf_pts = np.ones(t.size) if confidence is None else np.asarray(confidence)[good]
     reach = None
     if stray_distance > 0 and stray_speed > 0:
-        reach = (stray_distance, stray_speed, stray_accel, stray_window)
+        reach = (stray_distance, stray_speed, stray_accel, stray_window, stray_span)
     fit_args = (max_gap, max_extrapolation, bin_seconds, context_gap, context_window, reach)
     traj = _fit(t, xyz, conf_pts, *fit_args)
     if stray_distance > 0:
@@ -267,7 +271,7 @@ def _fit(
     bin_seconds: float,
     context_gap: float,
     context_window: float,
-    reach: tuple[float, float, float, float] | None,
+    reach: tuple[float, float, float, float, float] | None,
 ) -> Trajectory:
     """:func:`fit_trajectory` without the stray refits, on finite points."""
     order = np.argsort(t, kind="stable")
@@ -336,18 +340,27 @@ def _unreachable(
     ws: np.ndarray,
     i: int,
     side: np.ndarray,
-    reach: tuple[float, float, float, float],
+    reach: tuple[float, float, float, float, float],
 ) -> bool:
     """Whether no object could have got to sample ``i`` from the samples ``side`` (on one
     side of it, the nearest last): farther than ``base + speed * dt`` from the nearest,
     or farther than ``base + accel * dt^2 / 2`` from where the ``window`` seconds of
-    them next to it were heading (a straight line through them)."""
-    base, speed, accel, window = reach
+    them next to it were heading (a straight line through them, over at least ``span``
+    seconds of them where there are)."""
+    base, speed, accel, window, span = reach
     j = side[-1]
     gap = abs(ts[i] - ts[j])
     if np.linalg.norm(ps[i] - ps[j]) > base + speed * gap:
         return True
     near = side[np.abs(ts[side] - ts[j]) <= window]
+    if span > 0 and near.size < side.size and np.ptp(ts[near]) < span:
+        # Over less than `span` the heading is the scatter of a frame or two (fast_pass
+        # 5604 of the fifty-fifth set: two returns 0.06 s apart threw out the pass's
+        # lone return 1 s on, deviation 123). The nearest ones further in join them.
+        apart = np.abs(ts[side] - ts[j])
+        order = np.argsort(apart, kind="stable")
+        k = int(np.searchsorted(np.maximum.accumulate(apart[order]), span)) + 1
+        near = side[order[:k]]
     if near.size < 2 or np.ptp(ts[near]) <= 0:
         return False
     velocity, mean, tc = weighted_line(ts[near], ps[near], ws[near])
@@ -360,7 +373,7 @@ def _reachable_groups(
     ps: np.ndarray,
     ws: np.ndarray,
     groups: list[np.ndarray],
-    reach: tuple[float, float, float, float],
+    reach: tuple[float, float, float, float, float],
 ) -> list[np.ndarray]:
     """Segments (sample indices) with their unreachable end samples trimmed, one by one,
     and without the short ones (fewer than five samples) that no neighbouring segment

@@ -263,3 +263,33 @@ def test_overlapping_segments_prefer_the_one_holding_the_stamp_then_the_longer()
     same = np.column_stack([-t_same, np.zeros_like(t_same), np.full_like(t_same, 4.0)])
     alike = [parts[0], fit_trajectory(t_same, same, **kw)]
     assert np.allclose(merge_trajectories(alike, 0.5)(np.array([6.0]))[0, 1], 10.0, atol=0.05)
+
+
+@pytest.mark.parametrize("span", [0.0, 0.2])
+def test_a_heading_is_read_over_two_frame_periods_at_least(span):
+    # Deviation 123, fast_pass 5604 of the fifty-fifth set: a pass at 10 m/s, seen to
+    # 0.9 s, gave two returns 0.06 s apart (0.3 m apart across its way) 1 s later, and a
+    # lone return 1 s after those, on its line. The two alone (the last second's
+    # samples) "headed" 5 m/s sideways, and the lone return was thrown out as
+    # unreachable; read over 0.2 s at least (the nearest further in join them), the
+    # heading is the pass's and the return is kept.
+    t = np.concatenate([np.arange(0.0, 0.91, 0.1), [1.88, 1.94, 2.92]])
+    xyz = np.column_stack([10.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])
+    xyz[-3, 1], xyz[-2, 1] = 0.15, -0.15
+    traj = fit_trajectory(
+        t,
+        xyz,
+        max_gap=1.0,
+        max_extrapolation=0.5,
+        bin_seconds=0.05,
+        stray_distance=2.0,
+        stray_speed=15.0,
+        stray_accel=4.0,
+        stray_window=1.0,
+        stray_span=span,
+    )
+    late = traj(np.array([2.92, 3.2]))
+    if span:
+        np.testing.assert_allclose(late[:, 0], [29.2, 32.0], atol=0.3)
+    else:
+        assert np.isnan(late).all()
