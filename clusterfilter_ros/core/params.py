@@ -1327,11 +1327,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "the clustering left as noise or in clusters too small to score, found by growing "
         "the track forward in time as offline does (across gaps up to extend_max_gap, or "
         "extend_hover_gap for a hovering end; extend_far_gap with report_extend_far), for "
-        "the frames after "
-        "the track's cluster ends, once the live output has reported the track up to "
-        "within max_gap of that end and over at least report_lag_min_run: a pass leaving "
-        "the lidars gives a return or two a second. The live output does not use them; "
-        "false = off.",
+        "the frames after the track's cluster ends, once the live output has reported "
+        "the track up to within max_gap of that end and over at least "
+        "report_lag_min_run: a pass leaving the lidars gives a return or two a second. "
+        "The live output does not use them; false = off.",
     ),
     ParamSpec(
         "report_extend_far",

@@ -359,8 +359,7 @@ def _unreachable(
         # lone return 1 s on, deviation 123). The nearest ones further in join them.
         apart = np.abs(ts[side] - ts[j])
         order = np.argsort(apart, kind="stable")
-        k = int(np.searchsorted(np.maximum.accumulate(apart[order]), span)) + 1
-        near = side[order[:k]]
+        near = side[order[: int(np.searchsorted(apart[order], span)) + 1]]
     if near.size < 2 or np.ptp(ts[near]) <= 0:
         return False
     velocity, mean, tc = weighted_line(ts[near], ps[near], ws[near])
