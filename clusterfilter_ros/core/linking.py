@@ -466,7 +466,10 @@ def extend_track(
     An end leaving the lidars (:func:`_leaving`: a pass whose returns thin out with
     range) takes, across gaps up to ``extend_far_gap``, a lone return near its line
     farther out (:func:`_near_line`) at a spot that returned nothing else a second
-    before or after (:func:`_seen_again`).
+    before or after (:func:`_seen_again`). With ``extend_brake_hover``, an end still
+    moving takes, across gaps up to ``extend_hover_gap``, a return where braking would
+    have stopped it (:func:`_braking_offsets`) that another return confirms there
+    (:func:`_seen_still`): a drone braking into a hover, then seen in lone returns.
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
     the end. ``grow_end`` False: grow the start only; ``grow_start`` False: the end
     only. Returns the new member mask.
@@ -500,10 +503,20 @@ def extend_track(
             slow = vel is not None and float(np.linalg.norm(vel)) < params.min_speed
             end_range = float(np.linalg.norm(pos - viewpoint))
             leaving = far_gap > gap and _leaving(pos - viewpoint, vel, forward)
+            # A moving end braking into a hover (extend_brake_hover, deviation 124).
+            braking = (
+                params.extend_brake_hover
+                and not slow
+                and vel is not None
+                and hover_gap > gap
+                and float(params.extend_max_brake) > float(params.link_max_accel)
+            )
             if slow:
                 span = max(gap, hover_gap)
+            elif leaving:
+                span = max(gap, far_gap, hover_gap if braking else 0.0)
             else:
-                span = max(gap, far_gap) if leaving else gap
+                span = max(gap, hover_gap) if braking else gap
             if forward:
                 lo = np.searchsorted(pool_t, edge, side="right")
                 hi = np.searchsorted(pool_t, edge + span, side="right")
@@ -536,13 +549,24 @@ def extend_track(
             pts = xyz[pool_idx[cand]]
             ok = np.linalg.norm(pts - pred, axis=1) <= reach
             if vel is not None:
-                ok |= _braking_offsets(pts, pos, vel, dt, params) <= params.link_gate
-            if leaving:  # beyond the usual gap: a lone return far out, near its line
-                beyond = adt > gap
-                if beyond.any():
-                    ok &= ~beyond | _near_line(pts, pos, vel, dt, end_range, viewpoint, params)
-                    for i in np.nonzero(ok & beyond)[0]:
-                        ok[i] = not _seen_again(pool_idx[cand[i]], xyz, t, params)
+                brake_ok = _braking_offsets(pts, pos, vel, dt, params) <= params.link_gate
+                ok |= brake_ok
+            beyond = adt > gap
+            far_ok = np.zeros(cand.size, dtype=bool)
+            if leaving and beyond.any():  # a lone return far out, near its line
+                far_ok = beyond & (adt <= far_gap) & ok
+                far_ok &= _near_line(pts, pos, vel, dt, end_range, viewpoint, params)
+                for i in np.nonzero(far_ok)[0]:
+                    far_ok[i] = not _seen_again(pool_idx[cand[i]], xyz, t, params)
+            if leaving or braking:
+                # Beyond the usual gap only what these rules take: a lone far return on
+                # a leaving pass's line, or one where a braking end stopped that returned
+                # again there (a tree's or noise return alone does not: fast_pass 2504,
+                # `birds` 3201).
+                stop_ok = beyond & brake_ok if braking else np.zeros(cand.size, dtype=bool)
+                for i in np.nonzero(stop_ok)[0]:
+                    stop_ok[i] = _seen_still(pool_idx[cand[i]], pool_idx, xyz, t, params)
+                ok = np.where(beyond, far_ok | stop_ok, ok)
             if not ok.any():
                 break
             # The nearest frame in time among the reachable points joins the track.
@@ -609,6 +633,19 @@ def _seen_again(i: int, xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> boo
     the same spot (too seldom to be static), a drone passing through does not."""
     near = np.linalg.norm(xyz - xyz[i], axis=1) <= 2.0 * params.link_gate
     return bool((near & (np.abs(t - t[i]) > 1.0)).any())
+
+
+def _seen_still(
+    i: int, pool_idx: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+) -> bool:
+    """Whether another of the ``pool_idx`` returns lies within ``link_gate`` of point
+    ``i`` in another frame at most ``max_gap`` from it: a drone stopped there returns
+    again there."""
+    fp = float(params.frame_period)
+    dt = np.abs(t[pool_idx] - t[i])
+    near = (dt > fp / 2) & (dt <= params.max_gap)
+    near &= np.linalg.norm(xyz[pool_idx] - xyz[i], axis=1) <= params.link_gate
+    return bool(near.any())
 
 
 def _braking_offsets(

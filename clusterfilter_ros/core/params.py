@@ -688,6 +688,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "extend_brake_hover",
+        "bool",
+        True,
+        "Offline: a selected track's end still moving (at least min_speed) also grows "
+        "across gaps up to extend_hover_gap by a return within link_gate of where it would "
+        "have come to a stop braking between link_max_accel and extend_max_brake, when "
+        "another return lies within link_gate of it in another frame at most max_gap "
+        "away: a drone braking into a hover 30 m out, then seen there in lone returns "
+        "(not a lone tree or noise return). The late output's growth does not use it; "
+        "false = such ends grow across extend_max_gap only.",
+    ),
+    ParamSpec(
         "extend_denoised",
         "bool",
         True,

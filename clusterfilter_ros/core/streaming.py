@@ -1911,7 +1911,9 @@ def _grown(
         xyz[sub],
         t[sub],
         grow[sub],
-        params if far else params.copy(extend_far_gap=0.0),
+        # Not braking into a hover beyond extend_max_gap (extend_brake_hover, offline
+        # only: not measured on the late output).
+        params.copy(extend_brake_hover=False, **({} if far else {"extend_far_gap": 0.0})),
         grow_end=forward,
         grow_start=not forward,
     )

@@ -581,18 +581,21 @@ def test_extend_track_bridges_no_gap_into_returns_below_the_floor():
     assert extend_track(member, xyz, t, ~member, params)[land_t.size + 1 :].any()
 
 
-def _braking_into_a_hover(first_return: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def _braking_into_a_hover(
+    first_return: tuple[float, float], delay: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Take-off seed 2303 of the twenty-second fresh set: a track at 7.6 m/s along x whose
     last return is at x = 26 m (9.95 s), and the returns of a hover 1.15-4.55 s later at
     ``first_return`` (along x, across in y). The drone braked harder than link_max_accel:
     the hover lies 5.1 m short of where the track was heading, beyond the reach of 4.1 m.
-    Returns (xyz, t) of the track (2 returns a frame) followed by the hover's 10."""
+    Returns (xyz, t) of the track (2 returns a frame) followed by the hover's 10,
+    ``delay`` s later still."""
     rng = np.random.default_rng(3)
     track_t = np.repeat(np.arange(8.0, 9.96, 0.15), 2)
     track = np.column_stack(
         [26.0 + 7.6 * (track_t - 9.95), np.zeros_like(track_t), np.full_like(track_t, 14.0)]
     )
-    hover_t = np.linspace(11.1, 14.5, 10)
+    hover_t = np.linspace(11.1, 14.5, 10) + delay
     x, y = first_return
     hover = np.column_stack([np.full(10, 26.0 + x), np.full(10, y), np.full(10, 14.0)])
     hover += rng.normal(0.0, 0.05, hover.shape)
@@ -607,6 +610,24 @@ def test_extend_track_follows_a_drone_braking_into_a_hover():
     # Braking no harder than link_max_accel, the hover is out of reach.
     gentle = detector_params({"extend_max_brake": 4.0})
     assert not extend_track(member, xyz, t, ~member, gentle)[~member].any()
+
+
+def test_extend_track_finds_a_hover_seconds_after_a_braking_end():
+    # Take-off 5604 of the fifty-fifth set: the hover's first return came 1.51 s after
+    # the track's last, beyond extend_max_gap (1.5 s). Deviation 124: a moving end grows
+    # up to extend_hover_gap (3 s) by returns where braking would have stopped it, when
+    # another return confirms the spot; here the first comes 1.75 s on.
+    xyz, t = _braking_into_a_hover((3.67, 0.0), delay=0.6)
+    member = t < 10.0
+    assert extend_track(member, xyz, t, ~member, detector_params())[~member].all()
+    off = detector_params({"extend_brake_hover": False})
+    assert not extend_track(member, xyz, t, ~member, off)[~member].any()
+    # A lone return there (a tree's, noise), nothing else at that spot: not taken.
+    lone = np.flatnonzero(~member)[0]
+    keep = member.copy()
+    keep[lone] = True
+    grown = extend_track(member[keep], xyz[keep], t[keep], ~member[keep], detector_params())
+    assert not grown[~member[keep]].any()
 
 
 @pytest.mark.parametrize(
