@@ -466,10 +466,10 @@ def extend_track(
     An end leaving the lidars (:func:`_leaving`: a pass whose returns thin out with
     range) takes, across gaps up to ``extend_far_gap``, a lone return near its line
     farther out (:func:`_near_line`) at a spot that returned nothing else a second
-    before or after (:func:`_seen_again`). With ``extend_brake_hover``, an end still
+    before or after (:func:`_returned_near`). With ``extend_brake_hover``, an end still
     moving takes, across gaps up to ``extend_hover_gap``, a return where braking would
-    have stopped it (:func:`_braking_offsets`) that another return confirms there
-    (:func:`_seen_still`): a drone braking into a hover, then seen in lone returns.
+    have stopped it (:func:`_braking_offsets`) that another pool return confirms there
+    within ``max_gap``: a drone braking into a hover, then seen in lone returns.
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
     the end. ``grow_end`` False: grow the start only; ``grow_start`` False: the end
     only. Returns the new member mask.
@@ -485,6 +485,7 @@ def extend_track(
     pool_idx = np.nonzero(pool)[0]
     pool_idx = pool_idx[np.argsort(t[pool_idx], kind="stable")]
     pool_t = t[pool_idx]
+    pool_xyz = xyz[pool_idx]
     # A lone stray return at either end of the track (another object's, joined by the
     # clusterer) stays a member but does not define where the track was heading.
     inner = member & ~_stray_end_points(member, xyz, t, params)
@@ -546,7 +547,7 @@ def extend_track(
                     gate = params.track_gate
                     capped = np.where(adt > params.max_gap, np.minimum(reach, gate), reach)
                     reach = np.where(adt > gap, gate, capped)
-            pts = xyz[pool_idx[cand]]
+            pts = pool_xyz[cand]
             ok = np.linalg.norm(pts - pred, axis=1) <= reach
             if vel is not None:
                 brake_ok = _braking_offsets(pts, pos, vel, dt, params) <= params.link_gate
@@ -556,16 +557,31 @@ def extend_track(
             if leaving and beyond.any():  # a lone return far out, near its line
                 far_ok = beyond & (adt <= far_gap) & ok
                 far_ok &= _near_line(pts, pos, vel, dt, end_range, viewpoint, params)
+                # At a spot nothing else returned from a second before or after: a tree
+                # crown or a wall far out returns now and then at the same spot (too
+                # seldom to be static), a drone passing through does not.
                 for i in np.nonzero(far_ok)[0]:
-                    far_ok[i] = not _seen_again(pool_idx[cand[i]], xyz, t, params)
+                    far_ok[i] = not _returned_near(
+                        pts[i], pool_t[cand[i]], xyz, t, 2.0 * params.link_gate, 1.0
+                    )
             if leaving or braking:
                 # Beyond the usual gap only what these rules take: a lone far return on
                 # a leaving pass's line, or one where a braking end stopped that returned
                 # again there (a tree's or noise return alone does not: fast_pass 2504,
                 # `birds` 3201).
                 stop_ok = beyond & brake_ok if braking else np.zeros(cand.size, dtype=bool)
+                # A drone stopped there returns again there: another pool return in
+                # another frame at most max_gap away.
                 for i in np.nonzero(stop_ok)[0]:
-                    stop_ok[i] = _seen_still(pool_idx[cand[i]], pool_idx, xyz, t, params)
+                    stop_ok[i] = _returned_near(
+                        pts[i],
+                        pool_t[cand[i]],
+                        pool_xyz,
+                        pool_t,
+                        params.link_gate,
+                        fp / 2,
+                        params.max_gap,
+                    )
                 ok = np.where(beyond, far_ok | stop_ok, ok)
             if not ok.any():
                 break
@@ -627,25 +643,20 @@ def _near_line(
     return far & (np.abs(along) <= reach) & (across <= lateral)
 
 
-def _seen_again(i: int, xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> bool:
-    """Whether any other return lies within two ``link_gate`` of point ``i`` more than a
-    second before or after it: a tree crown or a wall far out returns now and then at
-    the same spot (too seldom to be static), a drone passing through does not."""
-    near = np.linalg.norm(xyz - xyz[i], axis=1) <= 2.0 * params.link_gate
-    return bool((near & (np.abs(t - t[i]) > 1.0)).any())
-
-
-def _seen_still(
-    i: int, pool_idx: np.ndarray, xyz: np.ndarray, t: np.ndarray, params: ParamSet
+def _returned_near(
+    point: np.ndarray,
+    stamp: float,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    radius: float,
+    min_dt: float,
+    max_dt: float = np.inf,
 ) -> bool:
-    """Whether another of the ``pool_idx`` returns lies within ``link_gate`` of point
-    ``i`` in another frame at most ``max_gap`` from it: a drone stopped there returns
-    again there."""
-    fp = float(params.frame_period)
-    dt = np.abs(t[pool_idx] - t[i])
-    near = (dt > fp / 2) & (dt <= params.max_gap)
-    near &= np.linalg.norm(xyz[pool_idx] - xyz[i], axis=1) <= params.link_gate
-    return bool(near.any())
+    """Whether any of the returns ``xyz``, ``t`` lies within ``radius`` of ``point``,
+    more than ``min_dt`` and at most ``max_dt`` seconds from ``stamp``."""
+    dt = np.abs(t - stamp)
+    near = (dt > min_dt) & (dt <= max_dt)
+    return bool((near & (np.linalg.norm(xyz - point, axis=1) <= radius)).any())
 
 
 def _braking_offsets(
