@@ -1886,6 +1886,10 @@ def _grown(
     (the track's newest sample, after it; else its first, before it) of the points in
     ``pool`` the track of ``mask`` grows into at that end (:func:`extend_track`, one end
     only)."""
+    if not mask.any():
+        # The track's samples lie off its points' stamps (a stamp so large that the
+        # frame-sample bins round it away): nothing to grow from.
+        return ()
     span = max(params.link_fit_window, params.link_max_gap)
     # Only what the growth reads: the pool beyond the track's end and the track's
     # seconds there, whose line the growth starts from.

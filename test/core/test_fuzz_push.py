@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from clusterfilter_ros.core.estimate import Estimate
@@ -103,6 +103,26 @@ def frame_streams(draw: st.DrawFn) -> tuple[list[Frame], dict]:
     return frames, overrides
 
 
+def _huge_stamp_then_nothing() -> tuple[list[Frame], dict]:
+    """Found by this test: a blob at stamp -1e300, then 2 s of empty frames from 0.1 s.
+    The track's sample time rounded off its returns' stamp, and the late output's growth
+    of its head had no returns to start from (a ValueError before the guard in
+    ``streaming._grown``)."""
+    rng = np.random.default_rng(0)
+    blob = (np.array([0.0, 5.0, 20.0]) + rng.normal(0, 0.1, (50, 3))).astype(np.float32)
+    empty = np.empty((0, 3), np.float32)
+    frames = [Frame(-1e300, AVIA, blob)] + [Frame(0.1 * i, AVIA, empty) for i in range(1, 20)]
+    overrides = {
+        "recluster_period": 0.0,
+        "min_support_frames": 1,
+        "min_confidence": 0.0,
+        "report_lag": 0.3,
+        "warmup": 0.0,
+    }
+    return frames, overrides
+
+
+@example(stream=_huge_stamp_then_nothing())
 @settings(
     max_examples=EXAMPLES,
     deadline=None,
