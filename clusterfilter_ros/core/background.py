@@ -36,6 +36,25 @@ def _popcount(x: np.ndarray) -> np.ndarray:
     return np.unpackbits(as_bytes, axis=1).sum(axis=1).astype(np.int64)
 
 
+def _lowest_bit(x: np.ndarray) -> np.ndarray:
+    """(N,) int64: index of the lowest set bit of each nonzero uint64 in ``x``."""
+    x = np.asarray(x, dtype=np.uint64)
+    low = x & (~x + np.uint64(1))  # isolate the lowest set bit
+    return _highest_bit(low)
+
+
+def _highest_bit(x: np.ndarray) -> np.ndarray:
+    """(N,) int64: index of the highest set bit of each nonzero uint64 in ``x``."""
+    x = np.asarray(x, dtype=np.uint64)
+    out = np.zeros(x.shape, dtype=np.int64)
+    for shift in (32, 16, 8, 4, 2, 1):
+        s = np.uint64(shift)
+        big = (x >> s) != 0
+        out += np.where(big, shift, 0)
+        x = np.where(big, x >> s, x)
+    return out
+
+
 def _dilate(static_keys: np.ndarray, dilation: int) -> np.ndarray:
     """Sorted keys of the static voxels plus their 26 neighbours (dilation 1)."""
     if dilation <= 0 or static_keys.size == 0:
@@ -194,6 +213,7 @@ class BackgroundGrid:
         self.keys = np.empty(0, np.int64)
         self.masks = np.empty(0, np.uint64)
         self.bin = None  # bin index that bit 0 stands for
+        self.first = None  # bin index of the first update (bits older than it are unknown)
 
     def window_bins(self) -> int:
         return max(1, min(_MAX_BINS, math.ceil(self.params.global_window / self.params.static_bin)))
@@ -204,6 +224,7 @@ class BackgroundGrid:
         now_bin = math.floor(now / p.static_bin)  # a float stays finite for any stamp
         if self.bin is None:
             self.bin = now_bin
+            self.first = now_bin
         shift = now_bin - self.bin
         if shift > 0:
             if shift >= _MAX_BINS:
@@ -243,10 +264,35 @@ class BackgroundGrid:
             self.keys, self.masks = self.keys[keep], self.masks[keep]
 
     def static_keys(self) -> np.ndarray:
-        """Sorted keys of the voxels currently considered static (dilated as configured)."""
-        return suppressed_keys(
-            self.keys[_popcount(self.masks) >= self.params.static_min_bins], self.params
-        )
+        """Sorted keys of the voxels currently considered static (dilated as configured);
+        with ``stream_static_drift``, without the groups a slowly moving object left
+        (:meth:`drifting_keys`)."""
+        persistent = _popcount(self.masks) >= self.params.static_min_bins
+        keys = self.keys[persistent]
+        if self.params.stream_static_drift and self.params.static_drift_span > 0:
+            drifting = self.drifting_keys(keys, self.masks[persistent])
+            if drifting.size:
+                keys = np.setdiff1d(keys, drifting, assume_unique=True)
+        return suppressed_keys(keys, self.params)
+
+    def drifting_keys(self, keys: np.ndarray, masks: np.ndarray) -> np.ndarray:
+        """Of the persistent ``keys`` (hit ``masks``), those :func:`drifting_static_keys`
+        releases, each voxel's span read from its oldest and newest hit bin in the window
+        (deviation 125). Offline, structure is told by being hit over the whole
+        recording; the map holds only ``global_window`` seconds, and at start-up less.
+        So a voxel's span counts only if the map held it unhit for at least
+        ``static_drift_span`` seconds before its first hit (a drone arrives where
+        nothing was); any other voxel's span is unknown and counts as long."""
+        if keys.size < 3 or self.bin is None or self.first is None:
+            return keys[:0]
+        oldest = min(self.window_bins() - 1, self.bin - self.first)  # in bins, back from now
+        newest_age = _lowest_bit(masks)
+        oldest_age = _highest_bit(masks)
+        p = self.params
+        unknown = (oldest - oldest_age) * p.static_bin < p.static_drift_span
+        # Ages count back from now: first bin = now - oldest age, last = now - newest age.
+        first_bin = np.where(unknown, -np.inf, -oldest_age.astype(np.float64))
+        return drifting_static_keys(keys, first_bin, -newest_age.astype(np.float64), p)
 
     @property
     def nbytes(self) -> int:

@@ -337,12 +337,23 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "static_drift_span",
         "float",
         8.0,
-        "Offline: a group of >= 3 touching static voxels whose median voxel was hit over at "
-        "most this many seconds is kept, and so are >= 3 touching voxels each hit over at "
-        "most this long that touch longer-hit structure: a drone drifting slowly, slowing "
-        "into a hover or hovering beside a tree, not structure (0 = off).",
+        "Offline (streaming: stream_static_drift): a group of >= 3 touching static voxels "
+        "whose median voxel was hit over at most this many seconds is kept, and so are >= 3 "
+        "touching voxels each hit over at most this long that touch longer-hit structure: "
+        "a drone drifting slowly, slowing into a hover or hovering beside a tree, not "
+        "structure (0 = off).",
         minimum=0.0,
         maximum=600.0,
+    ),
+    ParamSpec(
+        "stream_static_drift",
+        "bool",
+        True,
+        "Streaming: static_drift_span applies to the persistence map too, each voxel's "
+        "span read from its oldest and newest hit within global_window, and known only if "
+        "the map held the voxel unhit for static_drift_span seconds before (else long: "
+        "structure at start-up): a drone slowing into a hover over 3-4 voxels left the "
+        "history, and the late output lost it; false = off.",
     ),
     ParamSpec(
         "hover_detection",
@@ -588,10 +599,12 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "link_max_dv",
         "float",
-        10.0,
+        8.0,
         "Offline track linking: where both facing ends of two fragments have a velocity, "
         "the velocities may differ by at most this (m/s) plus link_max_accel * gap: a bird "
-        "leg heading where a drone's track begins is not the drone; 0 = off.",
+        "leg heading where a drone's track begins is not the drone (10 until deviation "
+        "126: a bird at 14 m/s took over a 2.4 m/s drone's track 1 s after it hid); "
+        "0 = off.",
         minimum=0.0,
         maximum=100.0,
     ),
@@ -628,7 +641,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "float",
         0.0,
         "Streaming: link_max_dv for the local history's linking; 0 = off (measured at 10 "
-        "on the spent seeds: small losses of detection, docs/detector.md deviation 88).",
+        "and 8 on the spent seeds: small losses of detection, and a bird leg left alone "
+        "was reported; docs/detector.md deviations 88 and 126).",
         minimum=0.0,
         maximum=100.0,
     ),

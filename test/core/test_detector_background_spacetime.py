@@ -169,6 +169,51 @@ def test_a_slowly_drifting_drone_is_not_static_structure():
     assert keys.size > 0
 
 
+def _grid_static(xyz, t, params, until: float) -> tuple[np.ndarray, np.ndarray]:
+    """The keys of each point and the grid's static keys, the points pushed 0.1 s at a
+    time up to stream time ``until``."""
+    grid = BackgroundGrid(params)
+    keys = voxel.voxel_keys(xyz, params.static_voxel)
+    for stamp in np.arange(0.0, until, 0.1):
+        now = (t >= stamp - 1e-9) & (t < stamp + 0.1 - 1e-9)
+        grid.update(keys[now], t[now], now=stamp)
+    return keys, grid.static_keys()
+
+
+def test_streaming_map_releases_a_slowly_drifting_drone():
+    xyz, t, drone = _wall_and_slow_drone()
+    params = detector_params()
+    # After 20 s: the wall was hit from the map's first bin, so its span is unknown
+    # and long; each voxel of the drone's path was hit for about 5 s.
+    keys, static = _grid_static(xyz, t, params, 20.0)
+    assert voxel.lookup(static, keys[~drone]).min() >= 0
+    assert (voxel.lookup(static, keys[drone & (t > 15)]) < 0).all()
+    _, without = _grid_static(xyz, t, params.copy(stream_static_drift=False), 20.0)
+    assert (voxel.lookup(without, keys[drone & (t > 15)]) >= 0).mean() > 0.8
+
+
+def test_streaming_map_keeps_structure_at_start_up():
+    xyz, t, drone = _wall_and_slow_drone()
+    params = detector_params()
+    # Six seconds in, every voxel was first hit at most 6 s ago, the wall's in the
+    # map's first bin: the wall stays static (its span is not known to be short).
+    keys, static = _grid_static(xyz, t, params, 6.0)
+    wall = ~drone & (t < 6.0)
+    assert (voxel.lookup(static, keys[wall]) >= 0).all()
+
+
+def test_streaming_map_keeps_structure_that_came_into_view():
+    xyz, t, drone = _wall_and_slow_drone()
+    params = detector_params()
+    # The wall is first hit 3 s after the map began: at 10 s each of its voxels was hit
+    # over 7 s, but the map had watched them for only 3 s before, too little to tell a
+    # drone that arrived there from structure that was there all along.
+    later = ~drone & (t >= 3.0) | drone
+    keys, static = _grid_static(xyz[later], t[later], params, 10.0)
+    wall = ~drone[later]
+    assert (voxel.lookup(static, keys[wall]) >= 0).all()
+
+
 def test_drifting_static_keys_needs_short_spans():
     from clusterfilter_ros.core.background import drifting_static_keys
 
