@@ -263,29 +263,38 @@ class BackgroundGrid:
             keep[drop] = False
             self.keys, self.masks = self.keys[keep], self.masks[keep]
 
-    def static_keys(self) -> np.ndarray:
+    def static_keys(self, watched_since: float = -math.inf) -> np.ndarray:
         """Sorted keys of the voxels currently considered static (dilated as configured);
         with ``stream_static_drift``, without the groups a slowly moving object left
-        (:meth:`drifting_keys`)."""
+        (:meth:`drifting_keys`; ``watched_since``: see there)."""
         persistent = _popcount(self.masks) >= self.params.static_min_bins
         keys = self.keys[persistent]
         if self.params.stream_static_drift and self.params.static_drift_span > 0:
-            drifting = self.drifting_keys(keys, self.masks[persistent])
+            drifting = self.drifting_keys(keys, self.masks[persistent], watched_since)
             if drifting.size:
                 keys = np.setdiff1d(keys, drifting, assume_unique=True)
         return suppressed_keys(keys, self.params)
 
-    def drifting_keys(self, keys: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    def drifting_keys(
+        self, keys: np.ndarray, masks: np.ndarray, watched_since: float = -math.inf
+    ) -> np.ndarray:
         """Of the persistent ``keys`` (hit ``masks``), those :func:`drifting_static_keys`
         releases, each voxel's span read from its oldest and newest hit bin in the window
         (deviation 125). Offline, structure is told by being hit over the whole
         recording; the map holds only ``global_window`` seconds, and at start-up less.
-        So a voxel's span counts only if the map held it unhit for at least
+        So a voxel's span counts only if the map watched it unhit for at least
         ``static_drift_span`` seconds before its first hit (a drone arrives where
-        nothing was); any other voxel's span is unknown and counts as long."""
+        nothing was); any other voxel's span is unknown and counts as long. The map
+        watches from its first update, or from ``watched_since`` (stream time) if later:
+        a lidar that paused saw nothing meanwhile."""
         if keys.size < 3 or self.bin is None or self.first is None:
             return keys[:0]
-        oldest = min(self.window_bins() - 1, self.bin - self.first)  # in bins, back from now
+        start = self.first
+        if math.isfinite(watched_since):
+            start = max(start, math.floor(watched_since / self.params.static_bin))
+        oldest = min(self.window_bins() - 1, self.bin - start)  # in bins, back from now
+        if oldest < 0:
+            return keys[:0]
         newest_age = _lowest_bit(masks)
         oldest_age = _highest_bit(masks)
         p = self.params

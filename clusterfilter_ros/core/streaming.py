@@ -350,6 +350,9 @@ class _HistorySnapshot:
     # (times (S,), positions (S, 3)) of the reported track's samples, with ``expected``
     # (stream_track_agree, and stream_split_track's share before the piece).
     track_path: tuple[np.ndarray, np.ndarray] | None = None
+    # Stamp since which every lidar seen so far has sent frames without a pause
+    # (stream_static_drift: the map watched the scene only then).
+    watched_since: float = -math.inf
 
 
 @dataclass(frozen=True)
@@ -455,6 +458,10 @@ class StreamingDetector:
         self._foreground_points = 0
         self._jump_candidate: float | None = None
         self._last_live = -math.inf  # stamp of the newest estimate push() returned
+        # stream_static_drift: each lidar's newest frame stamp, and the stamp since which
+        # every lidar seen so far has sent frames with no pause longer than static_bin.
+        self._sensor_last: dict[str, float] = {}
+        self._watched_since = -math.inf
         # report_backfill: frames stamped up to this had fallen due with nothing reported
         # live since them (without report_backfill they would have been dropped).
         self._unreported_until = -math.inf
@@ -522,6 +529,7 @@ class StreamingDetector:
         self._jump_candidate = None
         if math.isnan(self._origin):
             self._origin = stamp
+        self._watch(frame.sensor, stamp)
         xyz, t = frame_points(frame, self.params)
         self._now = max(self._now, stamp)
         dropped = None  # the denoise's dropped returns far enough out to be kept
@@ -628,6 +636,17 @@ class StreamingDetector:
         }
 
     # ------------------------------------------------------------------ internals
+    def _watch(self, sensor: str, stamp: float) -> None:
+        """Note a frame of ``sensor`` at ``stamp``: a lidar heard for the first time, or
+        again after a pause longer than ``static_bin``, starts the time the persistence
+        map has watched the scene afresh (deviation 125: the structure it sees again was
+        there all along, not a drone that arrived where nothing was)."""
+        last = self._sensor_last.get(sensor)
+        if last is None or stamp - last > self.params.static_bin:
+            self._watched_since = max(self._watched_since, stamp)
+        if last is None or stamp > last:
+            self._sensor_last[sensor] = stamp
+
     def _denoise(self, sensor: str, stamp: float, xyz: np.ndarray) -> np.ndarray:
         """Keep points whose neighbourhood over the recent frames of this sensor is dense."""
         p = self.params
@@ -743,6 +762,7 @@ class StreamingDetector:
             track_path=None
             if expected is None or not self._track
             else _sample_arrays(self._track)[:2],
+            watched_since=self._watched_since,
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
         if self.background:
@@ -1570,7 +1590,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     start = time.perf_counter()
     p = snap.params
     snap.grid.update(snap.hit_keys, snap.hit_times, snap.now)
-    static = snap.grid.static_keys()
+    static = snap.grid.static_keys(watched_since=snap.watched_since)
     xyz, t = snap.xyz, snap.t
     if xyz is not None and snap.static_keys is not None and p.static_suppression and static.size:
         xyz, t = _off_static(static, snap.static_keys, xyz, t)

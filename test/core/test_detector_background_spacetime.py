@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import BackgroundGrid, persistent_mask, static_offline
@@ -212,6 +213,38 @@ def test_streaming_map_keeps_structure_that_came_into_view():
     keys, static = _grid_static(xyz[later], t[later], params, 10.0)
     wall = ~drone[later]
     assert (voxel.lookup(static, keys[wall]) >= 0).all()
+
+
+def test_streaming_map_keeps_structure_a_paused_lidar_sees_again():
+    xyz, t, drone = _wall_and_slow_drone(seconds=32)
+    params = detector_params()
+    # The lidar that sees the wall paused from 2 s to 25 s: at 31 s each wall voxel was
+    # hit over the last 6 s only, and the map, which heard nothing from that lidar for
+    # 23 s, took it for empty before.
+    seen = ~drone & ((t < 2.0) | (t >= 25.0))
+    grid = BackgroundGrid(params)
+    keys = voxel.voxel_keys(xyz[seen], params.static_voxel)
+    for stamp in np.arange(0.0, 31.0, 0.1):
+        now = (t[seen] >= stamp - 1e-9) & (t[seen] < stamp + 0.1 - 1e-9)
+        grid.update(keys[now], t[seen][now], now=stamp)
+    wall = t[seen] >= 25.0
+    released = voxel.lookup(grid.static_keys(), keys[wall]) < 0
+    assert released.all()
+    # Told that the lidar came back at 25 s, the map watched those voxels for 6 s only.
+    assert (voxel.lookup(grid.static_keys(watched_since=25.0), keys[wall]) >= 0).all()
+
+
+def test_streaming_detector_watches_afresh_after_a_lidar_pause():
+    from clusterfilter_ros.core.frame import AVIA, MID360, Frame
+    from clusterfilter_ros.core.streaming import StreamingDetector
+
+    detector = StreamingDetector(detector_params())
+    empty = np.empty((0, 3), np.float32)
+    for stamp in np.arange(0.0, 10.0, 0.1):
+        detector.push(Frame(float(stamp), AVIA, empty))
+        if stamp < 4.0 or stamp >= 7.0:  # the Mid360 pauses 3 s
+            detector.push(Frame(float(stamp) + 0.05, MID360, empty))
+    assert detector._watched_since == pytest.approx(7.05)
 
 
 def test_drifting_static_keys_needs_short_spans():
