@@ -351,9 +351,10 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         True,
         "Streaming: static_drift_span applies to the persistence map too, each voxel's "
         "span read from its oldest and newest hit within global_window, and known only if "
-        "the map held the voxel unhit for static_drift_span seconds before (else long: "
-        "structure at start-up): a drone slowing into a hover over 3-4 voxels left the "
-        "history, and the late output lost it; false = off.",
+        "the map watched the voxel unhit for static_drift_span seconds before (else long: "
+        "structure at start-up, or seen again by a lidar after a pause of more than "
+        "static_bin): a drone slowing into a hover over 3-4 voxels left the history, and "
+        "the late output lost it; false = off.",
     ),
     ParamSpec(
         "hover_detection",
