@@ -162,6 +162,10 @@ class _TrackPiece:
     tail_from: float = math.inf
 
 
+#: Lidars whose newest frame stamp the detector keeps (stream_static_drift); the rig has
+#: two.
+_MAX_SENSORS = 8
+
 #: The samples, and the seconds they span, a quadratic fit of a track needs (live, and
 #: around a late estimate's stamp).
 _QUAD_SAMPLES = 6
@@ -644,6 +648,10 @@ class StreamingDetector:
         last = self._sensor_last.get(sensor)
         if last is None or stamp - last > self.params.static_bin:
             self._watched_since = max(self._watched_since, stamp)
+        if last is None and len(self._sensor_last) >= _MAX_SENSORS:
+            # Garbage sensor names must not grow the state: forget the stalest (heard
+            # again, it counts as new, which only delays releases).
+            del self._sensor_last[min(self._sensor_last, key=self._sensor_last.__getitem__)]
         if last is None or stamp > last:
             self._sensor_last[sensor] = stamp
 

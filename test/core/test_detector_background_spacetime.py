@@ -245,6 +245,10 @@ def test_streaming_detector_watches_afresh_after_a_lidar_pause():
         if stamp < 4.0 or stamp >= 7.0:  # the Mid360 pauses 3 s
             detector.push(Frame(float(stamp) + 0.05, MID360, empty))
     assert detector._watched_since == pytest.approx(7.05)
+    # Frames under ever new sensor names keep the state bounded.
+    for i in range(100):
+        detector.push(Frame(10.0 + 0.01 * i, f"lidar{i}", empty))
+    assert len(detector._sensor_last) <= 8
 
 
 def test_drifting_static_keys_needs_short_spans():
