@@ -293,11 +293,13 @@ class BackgroundGrid:
         if math.isfinite(watched_since):
             start = max(start, math.floor(watched_since / self.params.static_bin))
         oldest = min(self.window_bins() - 1, self.bin - start)  # in bins, back from now
-        if oldest < 0:
+        p = self.params
+        if oldest * p.static_bin < p.static_drift_span:
+            # Watched for less than static_drift_span: no span can be known yet (at
+            # start-up and after a lidar's pause), so skip the grouping.
             return keys[:0]
         newest_age = _lowest_bit(masks)
         oldest_age = _highest_bit(masks)
-        p = self.params
         unknown = (oldest - oldest_age) * p.static_bin < p.static_drift_span
         # Ages count back from now: first bin = now - oldest age, last = now - newest age.
         first_bin = np.where(unknown, -np.inf, -oldest_age.astype(np.float64))
