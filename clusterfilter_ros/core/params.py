@@ -1463,6 +1463,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "was heading (track_gate + link_max_accel x gap^2 / 2) and the joined cluster "
         "passes keep_confidence; false = such a fragment must be confirmed as a new track.",
     ),
+    ParamSpec(
+        "reacquire_compete",
+        "bool",
+        True,
+        "Streaming: where another selected cluster ranks first while the reported track "
+        "continues in a fragment after a gap (reacquire_join), the track's earlier "
+        "cluster (holding its returns before the fragment) joined with the fragment "
+        "competes: if that joined cluster passes min_confidence and ranks higher "
+        "(confidence x log(1 + frames)), the track is kept (a bird seen in more frames "
+        "while a drone 80 m up was hidden for 2 s took over a track whose returns went "
+        "on); false = the other cluster wins.",
+    ),
     # --- streaming accumulator ---
     ParamSpec(
         "global_window",

@@ -67,7 +67,12 @@ from clusterfilter_ros.core.linking import extend_track, fill_track
 from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points
-from clusterfilter_ros.core.scoring import score_clusters, select_clusters, structure_contact
+from clusterfilter_ros.core.scoring import (
+    ClusterScores,
+    score_clusters,
+    select_clusters,
+    structure_contact,
+)
 from clusterfilter_ros.core.splitting import kinematic_tracks, split_and_score
 from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
 
@@ -1701,6 +1706,14 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 joined = _joined_track(best, c, labels, xyz, t, k, scorer, ps, structure)
                 if joined is not None:
                     return choice(joined[0], max(joined[1], float(p.min_confidence)), True, k)
+            if p.reacquire_compete:
+                # Another object ranks first; the reported track, joined across its gap,
+                # competes with it as a candidate of its own.
+                kept = _competing_track(
+                    best, snap, labels, xyz, t, k, scores, scorer, ps, structure
+                )
+                if kept is not None:
+                    return choice(kept[0], kept[1], True, k)
         return choice(labels == best, float(scores.confidence[best]), True, k)
     if p.keep_confidence >= p.min_confidence or snap.expected is None:
         return choice(None, 0.0, False, k)
@@ -2204,14 +2217,14 @@ def _joined_track(
     scorer: Any,
     scoring: ParamSet,
     structure: np.ndarray | None = None,
-) -> tuple[np.ndarray, float] | None:
+) -> tuple[np.ndarray, float, float] | None:
     """Hysteresis across a gap (``reacquire_join``): a drone's first returns after a gap
     longer than the clusterer's linking form a cluster of their own (``c``, near where
     the reported track would be now), too small and too short to pass the gates, while
     the track's earlier returns sit in another (``o``). The two are scored as one cluster:
     its acceleration and residual judge whether the fragment continues the track's path.
-    (mask of the joined cluster, its confidence) if it is a candidate with at least
-    ``keep_confidence``, else None. The scoring's windows do not span the gap, so the
+    (mask of the joined cluster, its confidence, its rank score) if it is a candidate
+    with at least ``keep_confidence``, else None. The scoring's windows do not span the gap, so the
     fragment must also start where the track was heading: the straight-line fit over the
     track's last ``track_window`` seconds, carried to the fragment's first return, within
     ``track_gate`` plus ``link_max_accel`` x gap^2 / 2 of the fragment's first
@@ -2244,8 +2257,54 @@ def _joined_track(
     joined[labels == c] = o
     rescored = scorer(joined, xyz, t, params=scoring, n_clusters=k)
     if rescored.candidate[o] and rescored.confidence[o] >= scoring.keep_confidence:
-        return joined == o, float(rescored.confidence[o])
+        return (
+            joined == o,
+            float(rescored.confidence[o]),
+            float(rescored.rank_score(scoring.scoring)[o]),
+        )
     return None
+
+
+def _competing_track(
+    best: int,
+    snap: _HistorySnapshot,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    k: int,
+    scores: ClusterScores,
+    scorer: Any,
+    scoring: ParamSet,
+    structure: np.ndarray | None,
+) -> tuple[np.ndarray, float] | None:
+    """``reacquire_compete``: ``best`` (another object) ranks first, while the reported
+    track's newest returns lie in a fragment ``c`` that began after a gap. The cluster
+    holding the track's samples from before ``c`` began is joined with ``c``
+    (:func:`_joined_track`); the joined cluster is (mask, confidence) if it passes
+    ``min_confidence`` and ranks above ``best``, else None."""
+    if snap.track_path is None or snap.newest is None:
+        return None
+    p = scoring
+    t_last, position = snap.newest
+    c = _track_cluster(position, p.track_gate, labels, xyz, t, t_last - p.track_window, t_last)
+    if c is None or c == best:
+        return None
+    times, positions = snap.track_path
+    before = np.flatnonzero(times < scores.t_first[c])
+    if not before.size:
+        return None
+    i = before[-1]
+    o = _track_cluster(
+        positions[i], p.track_gate, labels, xyz, t, float(times[i]) - p.track_window, times[i]
+    )
+    if o is None or o in (best, c):
+        return None
+    joined = _joined_track(o, c, labels, xyz, t, k, scorer, p, structure)
+    if joined is None or joined[1] < p.min_confidence:
+        return None
+    if joined[2] <= float(scores.rank_score(p.scoring)[best]):
+        return None
+    return joined[0], joined[1]
 
 
 def _stray_samples(ts: np.ndarray, ps: np.ndarray, params: ParamSet) -> np.ndarray:

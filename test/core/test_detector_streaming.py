@@ -16,6 +16,7 @@ from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters
 from clusterfilter_ros.core.streaming import (
     StreamingDetector,
+    _competing_track,
     _joined_track,
     _off_reported,
     _split_track,
@@ -815,11 +816,17 @@ def test_a_track_resumes_after_a_gap_too_long_for_linking(drone_path_fn):
 
 
 class _Scores:
-    """What _joined_track reads of a scoring: every cluster alike."""
+    """What _joined_track and _competing_track read of a scoring: every cluster alike,
+    ranked as normalized scoring ranks (confidence x log(1 + frames))."""
 
-    def __init__(self, k: int, candidate: bool, confidence: float) -> None:
+    def __init__(self, k: int, candidate: bool, confidence: float, frames: float = 10.0) -> None:
         self.candidate = np.full(k, candidate)
         self.confidence = np.full(k, confidence)
+        self.support_frames = np.full(k, frames)
+        self.t_first = np.zeros(k)
+
+    def rank_score(self, scoring: str) -> np.ndarray:
+        return self.confidence * np.log1p(self.support_frames)
 
 
 def test_a_fragment_joins_the_track_only_where_it_was_heading_and_if_it_scores():
@@ -878,6 +885,57 @@ def test_a_fragment_joins_the_track_only_where_it_was_heading_and_if_it_scores()
     assert join(gap, structure="behind")[0] is not None
     assert join(gap, structure="under")[0] is None
     assert join(gap, structure="under", params=p.copy(hover_max_contact=1.0))[0] is not None
+
+
+def test_a_track_hidden_for_a_moment_competes_with_the_object_that_ranks_first():
+    # Deviation 127 (avia_only seed 5802 of the fifty-seventh set): a drone 80 m up was
+    # hidden for 2.2 s, more than link_max_gap, so its earlier returns (cluster 0) and
+    # those after the gap (cluster 1, the reported track's newest) are two clusters. A
+    # bird seen in more frames (cluster 2) overlapped the earlier piece in time and
+    # ranked first; the live output switched to it while the drone's returns went on.
+    p = detector_params()
+    t_track = np.repeat(np.arange(0.0, 2.0, 0.1), 3)
+    t_frag = np.repeat(np.arange(0.0, 0.8, 0.1), 3) + float(t_track.max()) + 2.2
+    t_bird = np.repeat(np.arange(1.5, 4.0, 0.1), 3)
+
+    def along(t: np.ndarray) -> np.ndarray:
+        return np.column_stack([10.0 + 8.0 * t, np.full(t.size, 5.0), np.full(t.size, 60.0)])
+
+    bird = np.column_stack(
+        [-20.0 + 9.0 * t_bird, np.full(t_bird.size, -15.0), np.full(t_bird.size, 8.0)]
+    )
+    t = np.concatenate([t_track, t_frag, t_bird])
+    xyz = np.vstack([along(t_track), along(t_frag), bird]).astype(np.float32)
+    labels = np.repeat([0, 1, 2], [t_track.size, t_frag.size, t_bird.size])
+    # The reported track: the earlier piece's samples and the fragment's (reacquire_join).
+    path_t = np.concatenate([np.unique(t_track), np.unique(t_frag)])
+    snap = types.SimpleNamespace(
+        track_path=(path_t, along(path_t)), newest=(float(path_t[-1]), along(path_t[-1:])[0])
+    )
+
+    def compete(
+        joined_confidence: float, joined_frames: float, bird_rank: float, params=p, reported=snap
+    ):
+        def scorer(joined, xyz_, t_, params, n_clusters):
+            return _Scores(n_clusters, True, joined_confidence, joined_frames)
+
+        scores = _Scores(3, True, 1.0, np.expm1(bird_rank))
+        scores.t_first = np.array([t[labels == c].min() for c in range(3)])
+        return _competing_track(2, reported, labels, xyz, t, 3, scores, scorer, params, None)
+
+    # Joined: confidence 0.9 over 30 frames ranks 3.09, above the bird's 2.16.
+    kept = compete(0.9, 30.0, 2.16)
+    assert kept is not None
+    assert (kept[0] == (labels < 2)).all() and kept[1] == 0.9
+    assert compete(0.9, 30.0, 3.2) is None  # the bird ranks higher: it wins
+    assert compete(p.min_confidence - 0.01, 300.0, 0.1) is None  # not confident enough
+    # The reported track holds no sample before the fragment: nothing to join.
+    alone = types.SimpleNamespace(
+        track_path=(np.unique(t_frag), along(np.unique(t_frag))), newest=snap.newest
+    )
+    assert compete(0.9, 30.0, 2.16, reported=alone) is None
+    # The fragment began too long after the earlier piece for one track (reacquire_window).
+    assert compete(0.9, 30.0, 2.16, params=p.copy(reacquire_window=2.0)) is None
 
 
 # ------------------------------------------------------------ background re-clustering
