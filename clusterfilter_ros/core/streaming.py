@@ -2224,11 +2224,11 @@ def _joined_track(
     the track's earlier returns sit in another (``o``). The two are scored as one cluster:
     its acceleration and residual judge whether the fragment continues the track's path.
     (mask of the joined cluster, its confidence, its rank score) if it is a candidate
-    with at least ``keep_confidence``, else None. The scoring's windows do not span the gap, so the
-    fragment must also start where the track was heading: the straight-line fit over the
-    track's last ``track_window`` seconds, carried to the fragment's first return, within
-    ``track_gate`` plus ``link_max_accel`` x gap^2 / 2 of the fragment's first
-    ``frame_period``, and (with the sorted ``structure`` keys of suppressed static
+    with at least ``keep_confidence``, else None. The scoring's windows do not span the
+    gap, so the fragment must also start where the track was heading: the straight-line
+    fit over the track's last ``track_window`` seconds, carried to the fragment's first
+    return, within ``track_gate`` plus ``link_max_accel`` x gap^2 / 2 of the fragment's
+    first ``frame_period``, and (with the sorted ``structure`` keys of suppressed static
     voxels) have at most ``hover_max_contact`` of its returns in or next to them: the
     swaying edge of a tree crown beside where a drone turned away is no continuation of
     its track (deviation 81)."""
