@@ -1372,6 +1372,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "estimate beside such a return was 2-4 m off the pass); false = neither.",
     ),
     ParamSpec(
+        "report_extend_brake",
+        "bool",
+        False,
+        "report_lag: the late output's growth at the track's ends also takes, as offline "
+        "does with extend_brake_hover, a return up to extend_hover_gap away where a "
+        "moving end braking harder than link_max_accel would have stopped, confirmed by "
+        "another return there (a drone braking into a hover 33 m out, seen next 1.5 s "
+        "later); false = the late growth stays within extend_max_gap of a moving end. Off: "
+        "on the spent seeds it gained three runs and lost three (a structure's returns "
+        "taken at start-up, a bird's track carried on; docs/detector.md deviation 124).",
+    ),
+    ParamSpec(
         "report_fill",
         "bool",
         True,

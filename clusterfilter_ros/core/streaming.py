@@ -1956,9 +1956,11 @@ def _grown(
         xyz[sub],
         t[sub],
         grow[sub],
-        # Not braking into a hover beyond extend_max_gap (extend_brake_hover, offline
-        # only: not measured on the late output).
-        params.copy(extend_brake_hover=False, **({} if far else {"extend_far_gap": 0.0})),
+        # Braking into a hover beyond extend_max_gap only with report_extend_brake.
+        params.copy(
+            extend_brake_hover=params.extend_brake_hover and params.report_extend_brake,
+            **({} if far else {"extend_far_gap": 0.0}),
+        ),
         grow_end=forward,
         grow_start=not forward,
     )

@@ -1346,3 +1346,37 @@ def test_the_late_tail_grows_from_the_tracks_own_end_not_the_clusters():
     # From the cluster's end, the tail is the bird's.
     from_cluster = _grown(mask, pool, xyz, t, samples[-1].t, p, forward=True)
     assert from_cluster and all(s.position[1] == pytest.approx(4.0) for s in from_cluster)
+
+
+@pytest.mark.parametrize("forward", [True, False], ids=["tail", "head"])
+def test_the_late_growth_finds_a_hover_after_a_braking_end_with_report_extend_brake(forward):
+    # Take-off 5801 of the fifty-seventh set: the drone braked from a climb into a stop
+    # 34 m out and was seen there only in lone returns; offline's growth (deviation 124,
+    # extend_brake_hover) takes the stop's returns, the late output's did not. Here a
+    # track at 7.6 m/s (2 returns a frame) whose last return is at 9.95 s, and a hover's
+    # returns from 1.75 s later, 3.67 m on, 5.1 m short of where the track was heading
+    # (beyond the linking reach and beyond extend_max_gap): taken with the switch, not
+    # without. Mirrored in time, the head grows back to the hover the drone left.
+    rng = np.random.default_rng(3)
+    track_t = np.repeat(np.arange(8.0, 9.96, 0.15), 2)
+    track = np.column_stack(
+        [26.0 + 7.6 * (track_t - 9.95), np.zeros_like(track_t), np.full_like(track_t, 14.0)]
+    )
+    hover_t = np.linspace(11.7, 15.1, 10)
+    hover = np.column_stack([np.full(10, 29.67), np.zeros(10), np.full(10, 14.0)])
+    hover += rng.normal(0.0, 0.05, hover.shape)
+    xyz = np.concatenate([track, hover]).astype(np.float32)
+    t = np.concatenate([track_t, hover_t])
+    if not forward:
+        t = 20.0 - t
+    mask = np.arange(t.size) < track_t.size
+    edge = float(t[mask].max() if forward else t[mask].min())
+
+    def grown(on: bool) -> tuple:
+        params = detector_params({"report_extend_brake": on})
+        return streaming._grown(mask, ~mask, xyz, t, edge, params, forward=forward)
+
+    assert grown(False) == ()
+    samples = grown(True)
+    assert len(samples) == 10
+    assert all(abs(s.position[0] - 29.67) < 0.3 for s in samples)
