@@ -711,8 +711,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "have come to a stop braking between link_max_accel and extend_max_brake, when "
         "another return lies within link_gate of it in another frame at most max_gap "
         "away: a drone braking into a hover 30 m out, then seen there in lone returns "
-        "(not a lone tree or noise return). The late output's growth does not use it; "
-        "false = such ends grow across extend_max_gap only.",
+        "(not a lone tree or noise return). The late output's growth uses it only with "
+        "report_extend_brake; false = such ends grow across extend_max_gap only.",
     ),
     ParamSpec(
         "extend_denoised",
