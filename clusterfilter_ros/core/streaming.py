@@ -1737,10 +1737,9 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         mask = _hovering_track(c, predicted, labels, xyz, t, k, scorer, ps)
         if mask is not None:
             return choice(mask, float(p.min_confidence), False, k)
-    if p.reacquire_join and snap.newest is not None:
+    if p.reacquire_join:
         # The cluster holding the track's newest returns.
-        t_last, position = snap.newest
-        o = _track_cluster(position, p.track_gate, labels, xyz, t, t_last - p.track_window, t_last)
+        o = _newest_cluster(snap, labels, xyz, t, p)
         if o is not None and o != c:
             joined = _joined_track(o, c, labels, xyz, t, k, scorer, ps, structure)
             if joined is not None:
@@ -2109,6 +2108,23 @@ def _track_cluster(
     return int(np.bincount(labels[near]).argmax())
 
 
+def _newest_cluster(
+    snap: _HistorySnapshot,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    params: ParamSet,
+) -> int | None:
+    """The cluster of ``labels`` holding the reported track's newest returns (those of
+    its last ``track_window`` up to its newest sample, within ``track_gate`` of it), or
+    None (also without a reported track)."""
+    if snap.newest is None:
+        return None
+    t_last, position = snap.newest
+    window = params.track_window
+    return _track_cluster(position, params.track_gate, labels, xyz, t, t_last - window, t_last)
+
+
 def _split_track(
     c: int,
     labels: np.ndarray,
@@ -2142,9 +2158,7 @@ def _split_track(
     # The piece must be the track's continuation, not another object that came near where
     # it was heading: it holds the track's newest returns and reaches back to its oldest
     # (or to the cluster's first, if the history holds less).
-    t_last, position = snap.newest
-    own = _track_cluster(position, params.track_gate, pieces, xm, tm, t_last - window, t_last)
-    if own != piece:
+    if _newest_cluster(snap, pieces, xm, tm, params) != piece:
         return None
     begins = float(tm[pieces == piece].min())
     if begins > max(snap.track_from, tm.min()) + window and not _few_before(snap, begins - window):
@@ -2284,11 +2298,10 @@ def _competing_track(
     holding the track's samples from before ``c`` began is joined with ``c``
     (:func:`_joined_track`); the joined cluster is (mask, confidence) if it passes
     ``min_confidence`` and ranks above ``best``, else None."""
-    if snap.track_path is None or snap.newest is None:
+    if snap.track_path is None:
         return None
     p = scoring
-    t_last, position = snap.newest
-    c = _track_cluster(position, p.track_gate, labels, xyz, t, t_last - p.track_window, t_last)
+    c = _newest_cluster(snap, labels, xyz, t, p)
     if c is None or c == best:
         return None
     times, positions = snap.track_path
