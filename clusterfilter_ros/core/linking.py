@@ -20,7 +20,10 @@ was heading:
   link only across one frame period, by the distance between A's end and B's start;
   where both ends have a velocity, they may differ by at most
   ``link_max_dv + link_max_accel * dt`` (a bird leg heading where the drone's track
-  begins is another object, however well its line meets the track);
+  begins is another object, however well its line meets the track), and where one of
+  them is at most ``link_rest_speed`` fast (at rest), A's end carried by the mean of
+  the two velocities must lie within the reach too (starting or stopping at constant
+  acceleration);
 - a fragment's first or last sample that is a single return lying beyond the linking
   reach of where the fragment's next ``link_fit_window`` of samples inward was heading
   (another object's return the clusterer joined to it) does not define that end; the
@@ -260,6 +263,18 @@ def _linkable(
     dist = np.minimum(dist, np.where(known_b, back, np.inf))
     dist = np.where(any_v, dist, plain)
     ok = dist <= reach
+    if params.link_rest_speed > 0:
+        # One end at rest: the object started (or stopped) during the gap, and at
+        # constant acceleration covered the mean of the two velocities times the gap.
+        # The nearer single-velocity carry alone let a bird's leg, carried back at its
+        # full speed, join a crown's returns it never left from (deviation 128).
+        rest = float(params.link_rest_speed)
+        both = known_a & known_b
+        at_rest = both & (np.minimum(speed_e[aa], speed_s[b]) <= rest)
+        mid = np.linalg.norm(
+            end_pos[aa] + 0.5 * (v_e[aa] + v_s[b]) * dt[:, None] - start_pos[b], axis=-1
+        )
+        ok &= ~at_rest | (mid <= reach)
     if params.link_max_dv > 0:
         # Both ends moving: the object cannot have changed its velocity by more than it
         # could accelerate over the gap, give or take the fits' error (deviation 88).

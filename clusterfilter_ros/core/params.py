@@ -610,6 +610,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "link_rest_speed",
+        "float",
+        2.0,
+        "Track linking: where both facing ends have a velocity and one is at most this "
+        "fast (m/s: at rest, a hover or a crown's scatter), the earlier end carried by the "
+        "mean of the two velocities (starting or stopping at constant acceleration) must "
+        "lie within the reach too: a bird leg whose start, carried back by its own "
+        "velocity, reaches a crown's returns did not leave from them (deviation 128); "
+        "0 = off.",
+        minimum=0.0,
+        maximum=100.0,
+    ),
+    ParamSpec(
         "link_max_speed",
         "float",
         15.0,
