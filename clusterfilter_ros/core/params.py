@@ -1402,10 +1402,21 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         True,
         "report_lag: the late output also reads the returns inside a gap of the reported "
         "track longer than max_gap (where its samples support no estimate) that lie on "
-        "its path, noise or in clusters too small to score, found as offline fills a "
+        "its path, noise or in clusters too small to score (any cluster's with "
+        "report_fill_clustered), found as offline fills a "
         "track (the linking reach over half the gap, at most track_gate from the chord): "
         "a far pass's single returns between the frames the clustering kept. The live "
         "output does not use them; false = off.",
+    ),
+    ParamSpec(
+        "report_fill_clustered",
+        "bool",
+        True,
+        "report_fill: the gaps are filled from the returns of other clusters too (within "
+        "track_gate of the chord, as offline fills a track), not only from noise and "
+        "clusters too small to score: a bird crossing a sparse hover joined the hover's "
+        "returns of the next seconds into its cluster, and the late output lost them "
+        "(deviation 129); false = noise and small clusters only.",
     ),
     ParamSpec(
         "report_denoised",

@@ -1633,7 +1633,13 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             head, tail = _grown_ends(gmask, gpool, gxyz, gt, samples, p)
             tail = _short_of_structure(tail, structure, p)
             if p.report_fill:
-                inner = _filled_gaps(gmask, gpool, gxyz, gt, p)
+                fpool = gpool
+                if p.report_fill_clustered:
+                    # Any cluster's returns within track_gate of the chord, as offline
+                    # fills a track: a bird crossing a sparse hover took the hover's
+                    # returns of the next seconds into its cluster (deviation 129).
+                    fpool = np.ones(gpool.shape, dtype=bool)
+                inner = _filled_gaps(gmask, fpool, gxyz, gt, p)
         ms = (time.perf_counter() - start) * 1e3
         n = 0 if t is None else int(t.size)
         return _TrackChoice(
