@@ -1139,11 +1139,9 @@ def _straight_pass(
     return out, path
 
 
-def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(scene):
-    # From 5.0 to 6.6 s the pass gives one return at 5.5 s and one at 6.1 s: the
-    # clustering leaves them as noise and links the two sides, whose 1.6 s gap (longer
-    # than max_gap) the late output's estimate would not cross; filled with them
-    # (report_fill, as offline fills a track) it does, and the live output is unchanged.
+def _pass_with_a_sparse_gap(scene) -> tuple[list[Frame], Callable[[np.ndarray], np.ndarray]]:
+    """The straight pass, three returns a frame, but from 5.0 to 6.6 s only one Mid360
+    return at 5.5 s and one at 6.1 s: (frames, path function of t)."""
     frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
 
     def returns(t, sensor):
@@ -1151,7 +1149,15 @@ def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(
             return int(sensor == MID360 and t in (5.5, 6.1))
         return 3
 
-    frames, path = _straight_pass(frames, returns)
+    return _straight_pass(frames, returns)
+
+
+def test_the_late_output_fills_a_long_gap_of_its_track_with_returns_on_its_path(scene):
+    # The clustering leaves the two returns in the gap as noise and links the two
+    # sides, whose 1.6 s gap (longer than max_gap) the late output's estimate would not
+    # cross; filled with them (report_fill, as offline fills a track) it does, and the
+    # live output is unchanged.
+    frames, path = _pass_with_a_sparse_gap(scene)
     runs, _ = _runs_with_and_without(
         frames, {"report_lag": LAG, "report_backfill": 0.0}, "report_fill"
     )
@@ -1165,14 +1171,7 @@ def test_the_late_output_fills_a_gap_with_its_returns_clustered_with_another_obj
     # a sparse hover). With report_fill_clustered the gap is filled from that cluster's
     # returns within track_gate (2 m) of the chord, the other object's are not taken
     # (deviation 129); without, the late output leaves the gap empty.
-    frames, _, _ = scene(duration=10.0, wall_points=200, drone=False)
-
-    def returns(t, sensor):
-        if 5.0 < t < 6.6:
-            return int(sensor == MID360 and t in (5.5, 6.1))
-        return 3
-
-    frames, path = _straight_pass(frames, returns)
+    frames, path = _pass_with_a_sparse_gap(scene)
     rng = np.random.default_rng(2)
     crowded = []
     for f in frames:
