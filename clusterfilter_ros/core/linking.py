@@ -268,13 +268,13 @@ def _linkable(
         # constant acceleration covered the mean of the two velocities times the gap.
         # The nearer single-velocity carry alone let a bird's leg, carried back at its
         # full speed, join a crown's returns it never left from (deviation 128).
-        rest = float(params.link_rest_speed)
-        both = known_a & known_b
-        at_rest = both & (np.minimum(speed_e[aa], speed_s[b]) <= rest)
-        mid = np.linalg.norm(
-            end_pos[aa] + 0.5 * (v_e[aa] + v_s[b]) * dt[:, None] - start_pos[b], axis=-1
-        )
-        ok &= ~at_rest | (mid <= reach)
+        slowest = np.minimum(speed_e[aa], speed_s[b])
+        r = np.flatnonzero(known_a & known_b & (slowest <= float(params.link_rest_speed)))
+        if r.size:
+            ra, rb = aa[r], b[r]
+            mean_v = 0.5 * (v_e[ra] + v_s[rb])
+            mid = np.linalg.norm(end_pos[ra] + mean_v * dt[r, None] - start_pos[rb], axis=-1)
+            ok[r] &= mid <= reach[r]
     if params.link_max_dv > 0:
         # Both ends moving: the object cannot have changed its velocity by more than it
         # could accelerate over the gap, give or take the fits' error (deviation 88).
