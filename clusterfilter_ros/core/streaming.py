@@ -2114,6 +2114,20 @@ def _track_cluster(
     return int(np.bincount(labels[near]).argmax())
 
 
+def _sample_cluster(
+    sample_t: float,
+    position: np.ndarray,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    params: ParamSet,
+) -> int | None:
+    """The cluster of ``labels`` holding a track sample's returns (those of the
+    ``track_window`` up to ``sample_t`` within ``track_gate`` of ``position``), or None."""
+    window = params.track_window
+    return _track_cluster(position, params.track_gate, labels, xyz, t, sample_t - window, sample_t)
+
+
 def _newest_cluster(
     snap: _HistorySnapshot,
     labels: np.ndarray,
@@ -2121,14 +2135,13 @@ def _newest_cluster(
     t: np.ndarray,
     params: ParamSet,
 ) -> int | None:
-    """The cluster of ``labels`` holding the reported track's newest returns (those of
-    its last ``track_window`` up to its newest sample, within ``track_gate`` of it), or
-    None (also without a reported track)."""
+    """The cluster of ``labels`` holding the reported track's newest returns
+    (:func:`_sample_cluster` of its newest sample), or None (also without a reported
+    track)."""
     if snap.newest is None:
         return None
     t_last, position = snap.newest
-    window = params.track_window
-    return _track_cluster(position, params.track_gate, labels, xyz, t, t_last - window, t_last)
+    return _sample_cluster(t_last, position, labels, xyz, t, params)
 
 
 def _split_track(
@@ -2315,9 +2328,7 @@ def _competing_track(
     if not before.size:
         return None
     i = before[-1]
-    o = _track_cluster(
-        positions[i], p.track_gate, labels, xyz, t, float(times[i]) - p.track_window, times[i]
-    )
+    o = _sample_cluster(float(times[i]), positions[i], labels, xyz, t, p)
     if o is None or o in (best, c):
         return None
     joined = _joined_track(o, c, labels, xyz, t, k, scorer, p, structure)
