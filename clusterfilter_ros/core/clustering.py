@@ -170,8 +170,18 @@ def merge_colocated_compact(
     return relabel_compact(out)
 
 
+#: Nearest compact-cluster returns :func:`absorb_colocated_noise` weighs per noise point
+#: when it checks their clusters' time spans.
+_ABSORB_NEIGHBOURS = 8
+
+
 def absorb_colocated_noise(
-    labels: np.ndarray, xyz: np.ndarray, max_extent: float, radius: float
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    max_extent: float,
+    radius: float,
+    t: np.ndarray | None = None,
+    max_gap: float | None = None,
 ) -> np.ndarray:
     """Labels with each noise point within ``radius`` of a point of a compact cluster
     (bounding box <= ``max_extent``) given that cluster's label (the nearest point's).
@@ -179,7 +189,13 @@ def absorb_colocated_noise(
     Space-time clustering leaves a hovering drone seen once a second partly as noise:
     a return with no neighbour within a time bin is not core; at the same spot as the
     drone's cluster it is the drone's too. Moving objects and extended structure are
-    not compact, so their clusters take nothing."""
+    not compact, so their clusters take nothing.
+
+    With stamps ``t`` and ``max_gap``, a noise point joins only a cluster whose time
+    span, widened by ``max_gap`` on both sides, holds its stamp (the nearest such
+    point's): over a whole sequence a hover split in two by a passing bird leaves two
+    compact clusters at one spot, and a lone return between them belongs to the one
+    that was there then."""
     labels = np.asarray(labels, dtype=np.int64)
     noise = np.flatnonzero(labels < 0)
     k = int(labels.max()) + 1 if labels.size else 0
@@ -192,10 +208,27 @@ def absorb_colocated_noise(
     inside = member[compact[labels[member]]]
     if inside.size == 0:
         return labels
-    dist, nearest = cKDTree(pts[inside]).query(pts[noise], distance_upper_bound=radius)
-    hit = np.isfinite(dist)
+    tree = cKDTree(pts[inside])
+    if t is None or max_gap is None:
+        dist, nearest = tree.query(pts[noise], distance_upper_bound=radius)
+        hit = np.isfinite(dist)
+        if not hit.any():
+            return labels
+        out = labels.copy()
+        out[noise[hit]] = labels[inside[nearest[hit]]]
+        return out
+    stamps = np.asarray(t, dtype=np.float64).reshape(-1)
+    ((first, last),) = group_bounds(labels[member], k, stamps[member])
+    n_near = min(_ABSORB_NEIGHBOURS, inside.size)
+    dist, nearest = tree.query(pts[noise], k=n_near, distance_upper_bound=radius)
+    dist, nearest = dist.reshape(noise.size, n_near), nearest.reshape(noise.size, n_near)
+    found = np.isfinite(dist)  # sorted by distance; misses are inf
+    c = labels[inside[np.where(found, nearest, 0)]]
+    ts = stamps[noise][:, None]
+    ok = found & (first[c] - max_gap <= ts) & (ts <= last[c] + max_gap)
+    hit = ok.any(axis=1)
     if not hit.any():
         return labels
     out = labels.copy()
-    out[noise[hit]] = labels[inside[nearest[hit]]]
+    out[noise[hit]] = c[hit, np.argmax(ok[hit], axis=1)]
     return out

@@ -35,6 +35,7 @@ import numpy as np
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import persistent_mask, static_offline
 from clusterfilter_ros.core.clustering import (
+    absorb_colocated_noise,
     dbscan_points,
     density_mask,
     merge_colocated_compact,
@@ -765,11 +766,26 @@ def detect_offline(
         static, structure = static_offline(xyz, t, params)
         xyz, t = xyz[~static], t[~static]
     labels, k = global_clusters(xyz, t, params)
+    tight_hover = None
+    if params.offline_tight_hover and params.hover_detection:
+        if params.stream_hover_min_frames < params.hover_min_frames:
+            tight_hover = (params.stream_hover_min_frames, params.stream_hover_max_extent)
+            if k:
+                # A far hover's lone returns count towards its frames (deviation 97),
+                # each with the piece at its spot that was there then.
+                extent = float(params.stream_hover_max_extent)
+                labels = absorb_colocated_noise(
+                    labels, xyz, extent, extent / 2, t=t, max_gap=params.link_max_gap
+                )
     # Fixed window origins: the pieces of a split cluster are scored alone.
     labelled = labels >= 0
     origin = float(t[labelled].min()) if labelled.any() else None
     score = functools.partial(
-        score_clusters, t0=origin, coherence_origin=origin, structure_keys=structure
+        score_clusters,
+        t0=origin,
+        coherence_origin=origin,
+        structure_keys=structure,
+        tight_hover=tight_hover,
     )
     scores = score(labels, xyz, t, params, n_clusters=k)
     was_split = None

@@ -492,6 +492,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=50.0,
     ),
     ParamSpec(
+        "offline_tight_hover",
+        "bool",
+        True,
+        "Offline: a tight, sparse hover is confirmed as streaming confirms it "
+        "(stream_hover_min_frames frames within stream_hover_max_extent, and the lone "
+        "returns at its spot within link_max_gap of its time span joined to its "
+        "cluster): a drone stopping 30 m from the rig between two legs of its flight "
+        "gives a return every half second, and its stay was left out (deviation 130); "
+        "false = hover_min_frames only.",
+    ),
+    ParamSpec(
         "hover_max_contact",
         "float",
         0.5,

@@ -475,3 +475,27 @@ def test_a_sparse_arrival_is_reported_with_the_track_it_leads_into():
     weak = dataclasses.replace(scores, confidence=np.array([0.2, scores.confidence[1]]))
     assert lead_in_piece(labels, xyz, t, scores, [1], params) == [0]
     assert lead_in_piece(labels, xyz, t, weak, [1], params) == []
+
+
+def test_a_tight_sparse_hover_is_selected_offline_with_offline_tight_hover():
+    # Deviation 130: a drone stopped 31 m from the rig between two legs of its flight
+    # gives a return every half second (take-off 6005: 11 returns in 3 s within 0.4 m),
+    # fewer frames than hover_min_frames; confirmed as streaming confirms such a hover.
+    rng = np.random.default_rng(3)
+    spot = np.array([27.5, 11.0, 12.5])
+    frames = []
+    for i in range(120):
+        sky = rng.normal(size=(40, 3))
+        sky[:, 2] = np.abs(sky[:, 2]) + 1.0
+        sky /= np.linalg.norm(sky, axis=1, keepdims=True)
+        parts = [sky * rng.uniform(20, 400, (40, 1))]
+        if 20 <= i < 80 and i % 5 == 0:  # 12 returns, 2.0-7.5 s
+            parts.append(spot + rng.uniform(-0.1, 0.1, (1, 3)))
+        frames.append(Frame(1000.0 + 0.1 * i, MID360, np.vstack(parts).astype(np.float32)))
+    res = detect_offline(frames, detector_params())
+    assert res.drone_points.shape[0] == 12
+    est = res.estimates
+    assert est.stamps[0] - 1000.0 < 2.1 and est.stamps[-1] - 1000.0 > 7.4
+    assert np.abs(est.xyz - spot).max() < 0.2
+    off = detect_offline(frames, detector_params({"offline_tight_hover": False}))
+    assert len(off.estimates) == 0

@@ -155,6 +155,24 @@ def test_noise_joins_a_compact_cluster_at_its_spot_only():
     assert empty.size == 0
 
 
+def test_with_stamps_noise_joins_the_compact_cluster_there_at_its_time():
+    # Deviation 130: a hover split in two by a passing bird leaves two compact clusters at
+    # one spot, 0 over 0-3 s and 1 over 8-12 s. A lone return at 9.5 s lies nearest to
+    # one of cluster 0's returns but joins cluster 1; one at 5.5 s, more than max_gap from
+    # both spans, stays noise; one at 3.5 s joins cluster 0.
+    spot = np.array([20.0, 5.0, 10.0])
+    first = spot + np.array([[0.05, 0.0, 0.0], [0.1, 0.0, 0.0], [0.15, 0.0, 0.0]])
+    second = spot + np.array([[-0.15, 0.0, 0.0], [-0.1, 0.0, 0.0], [-0.05, 0.0, 0.0]])
+    lone = spot + np.array([[0.08, 0.0, 0.01], [0.0, 0.0, 0.0], [0.12, 0.0, 0.01]])
+    xyz = np.vstack([first, second, lone])
+    t = np.array([0.0, 1.5, 3.0, 8.0, 10.0, 12.0, 9.5, 5.5, 3.5])
+    labels = np.r_[np.zeros(3, int), np.ones(3, int), np.full(3, -1)]
+    out = absorb_colocated_noise(labels, xyz, 0.6, 0.3, t=t, max_gap=2.0)
+    assert out.tolist() == [0, 0, 0, 1, 1, 1, 1, -1, 0]
+    # Without stamps each joins the cluster of its nearest return.
+    assert absorb_colocated_noise(labels, xyz, 0.6, 0.3)[6:].tolist() == [0, 0, 0]
+
+
 @pytest.mark.parametrize("case", _unique_cases(), ids=lambda c: c[0])
 def test_unique_ints_equals_numpy_unique(case):
     _, values, fields, dense = case
