@@ -48,6 +48,7 @@ import numpy as np
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.grouping import group_bounds, lex_order
 from clusterfilter_ros.core.params import ParamSet
+from clusterfilter_ros.core.scoring import local_scatter
 
 #: Candidate pairs are formed in blocks of at most this many clusters and about this
 #: many (cluster, candidate) cells, which bounds the memory whatever the scene.
@@ -510,6 +511,7 @@ def extend_track(
     for forward in [f for f, grow in ((True, grow_end), (False, grow_start)) if grow]:
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
+        stay = np.zeros(pool_idx.size, dtype=bool)  # taken since the first long pause
         while True:
             m = np.nonzero(inner)[0]
             edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
@@ -603,10 +605,30 @@ def extend_track(
             # The nearest frame in time among the reachable points joins the track.
             near_t = adt[ok].min()
             join = cand[ok & (adt <= near_t + fp / 2)]
+            if stay.any() or (near_t > gap and (slow or braking)):
+                stay[join] = True
             taken[join] = True
             member[pool_idx[join]] = True
             inner[pool_idx[join]] = True
+        if params.extend_stay_scatter and _scattered_stay(pool_xyz[stay], pool_t[stay], params):
+            member[pool_idx[stay]] = False
+            inner[pool_idx[stay]] = False
     return member
+
+
+def _scattered_stay(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> bool:
+    """Whether returns a growing end took after a hover's pause (deviation 131) are a
+    stay in place (at least three frames, bounding box within ``hover_max_extent``) that
+    scatters more than ``hover_max_scatter`` (:func:`~.scoring.local_scatter`): a tree
+    crown seen a return at a time, not a hovering drone, whose returns lie on its body."""
+    limit = float(params.hover_max_scatter)
+    if limit <= 0 or t.size < 3:
+        return False
+    frames = np.unique(np.round(t / float(params.frame_period)))
+    if frames.size < 3 or float(np.ptp(xyz, axis=0).max()) > params.hover_max_extent:
+        return False
+    scatter = local_scatter(np.zeros(t.size, dtype=np.int64), xyz, t, 1)
+    return bool(scatter[0] > limit)
 
 
 #: Slowest end (m/s) that grows across gaps up to ``extend_far_gap`` while leaving.

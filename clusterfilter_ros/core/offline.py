@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from clusterfilter_ros.core import voxel
 from clusterfilter_ros.core.background import persistent_mask, static_offline
@@ -55,7 +56,12 @@ from clusterfilter_ros.core.linking import (
 )
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import points_at, usable_and_below_floor
-from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
+from clusterfilter_ros.core.scoring import (
+    ClusterScores,
+    local_scatter,
+    score_clusters,
+    select_clusters,
+)
 from clusterfilter_ros.core.splitting import (
     Scorer,
     score_pieces,
@@ -565,6 +571,95 @@ def lead_in_piece(
     return []
 
 
+def _heads_to(origin: np.ndarray, velocity: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(M,) bool: whether ``velocity`` at ``origin`` points at each of ``targets`` (M, 3)
+    within 60 degrees (all False for an unknown or zero velocity)."""
+    speed = float(np.linalg.norm(velocity))
+    if not speed > 0:  # NaN velocity: unknown
+        return np.zeros(len(targets), dtype=bool)
+    way = np.asarray(targets, dtype=np.float64) - origin
+    distance = np.linalg.norm(way, axis=1)
+    return (distance > 0) & (way @ velocity >= 0.5 * speed * distance)
+
+
+def stop_between_pieces(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    params: ParamSet,
+    exclude: np.ndarray | None = None,
+) -> np.ndarray:
+    """stop_bridge_gap (deviation 132): labels with the stay of a drone that stopped
+    between two selected pieces, seen there in lone returns, labelled as the earlier
+    piece. Between consecutive pieces (by time) more than ``extend_max_gap`` and at most
+    ``stop_bridge_gap`` apart, the returns too few to be scored (noise and clusters
+    below ``min_cluster_points``, not in ``exclude``) in the gap, above
+    ``min_centroid_z``, where the earlier piece's end was heading and the later piece's
+    start came from (its velocity, each within 60 degrees of the way to the return), no
+    farther from either than ``link_gate`` plus its speed times the time between, are
+    candidates; the one with the most
+    frames of candidates within ``stream_hover_max_extent`` of it, if at least three
+    within a box that size, and scattering no more than ``hover_max_scatter``
+    (:func:`~.scoring.local_scatter`), is the stay. A drone flying on to a spot 32 m
+    out, staying there 2 s, then flying on, is seen neither on the way nor enough to be
+    a cluster there; growth does not cross the seconds before and after the stay."""
+    limit = float(params.stop_bridge_gap)
+    if limit <= 0 or len(selected) < 2:
+        return labels
+    small = scores.n_points < params.min_cluster_points
+    pool = ((labels < 0) | small[np.maximum(labels, 0)]) & ~np.isin(labels, selected)
+    if exclude is not None:
+        pool &= ~exclude
+    pieces = []
+    for c in selected:
+        member = labels == c
+        if member.any():
+            pieces.append(_piece_ends(c, t[member], xyz[member]))
+    pieces.sort(key=lambda e: e.first)
+    extent = float(params.stream_hover_max_extent)
+    fp = float(params.frame_period)
+    out = labels.copy()
+    for before, after in zip(pieces[:-1], pieces[1:], strict=True):
+        if not params.extend_max_gap < after.first - before.last <= limit:
+            continue
+        idx = np.flatnonzero(pool & (t > before.last) & (t < after.first))
+        pts = xyz[idx].astype(np.float64)
+        heading = _heads_to(before.p_last, before.v_last, pts)
+        heading &= _heads_to(after.p_first, -after.v_first, pts)
+        # No faster than the pieces flew: at most their speeds over the time between.
+        gate = float(params.link_gate)
+        heading &= np.linalg.norm(pts - before.p_last, axis=1) <= gate + np.linalg.norm(
+            before.v_last
+        ) * (t[idx] - before.t_last)
+        heading &= np.linalg.norm(pts - after.p_first, axis=1) <= gate + np.linalg.norm(
+            after.v_first
+        ) * (after.t_first - t[idx])
+        heading &= pts[:, 2] >= params.min_centroid_z
+        idx, pts = idx[heading], pts[heading]
+        if idx.size < 3:
+            continue
+        # Per candidate, the frames of the candidates within `extent` of it (itself too).
+        pairs = cKDTree(pts).query_pairs(extent, output_type="ndarray")
+        a = np.concatenate([np.arange(idx.size), pairs[:, 0], pairs[:, 1]])
+        b = np.concatenate([np.arange(idx.size), pairs[:, 1], pairs[:, 0]])
+        frames = np.round(t[idx] / fp).astype(np.int64)
+        seen = np.unique(np.column_stack([a, frames[b]]), axis=0)
+        counts = np.bincount(seen[:, 0], minlength=idx.size)
+        best = int(np.argmax(counts))
+        stay = np.unique(np.r_[best, b[a == best]])
+        stay = idx[stay]
+        if counts[best] < 3 or float(np.ptp(xyz[stay], axis=0).max()) > extent:
+            continue
+        scatter = local_scatter(np.zeros(stay.size, np.int64), xyz[stay], t[stay], 1)[0]
+        if params.hover_max_scatter > 0 and scatter > params.hover_max_scatter:
+            continue
+        out[stay] = before.cluster
+        pool[stay] = False
+    return out
+
+
 def extend_selected(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -838,6 +933,7 @@ def detect_offline(
         labels = extend_selected(
             labels, xyz, t, scores, selected, params, exclude, near_floor, frozenset(lead_in)
         )
+        labels = stop_between_pieces(labels, xyz, t, scores, selected, params, exclude)
     drone = np.isin(labels, selected)
     # One trajectory per selected cluster: a segment never bridges two objects.
     traj = merge_trajectories(

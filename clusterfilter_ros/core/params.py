@@ -408,6 +408,20 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=600.0,
     ),
     ParamSpec(
+        "stop_bridge_gap",
+        "float",
+        20.0,
+        "Offline: between two selected pieces of a track more than extend_max_gap and at "
+        "most this many seconds apart, a stay of returns too few to be scored (at least "
+        "three frames within stream_hover_max_extent, scattering at most "
+        "hover_max_scatter, above min_centroid_z) where the earlier piece was heading and "
+        "the later one came from (within 60 degrees, and no farther than their speeds "
+        "carry them by then) joins the earlier piece: a drone that flew on unseen, "
+        "stopped 32 m out for 2 s, then flew on (deviation 132); 0 = off.",
+        minimum=0.0,
+        maximum=600.0,
+    ),
+    ParamSpec(
         "lead_in_reach",
         "float",
         10.0,
@@ -737,6 +751,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "away: a drone braking into a hover 30 m out, then seen there in lone returns "
         "(not a lone tree or noise return). The late output's growth uses it only with "
         "report_extend_brake; false = such ends grow across extend_max_gap only.",
+    ),
+    ParamSpec(
+        "extend_stay_scatter",
+        "bool",
+        True,
+        "Growth at a track's ends (offline and the late output): the returns taken from "
+        "the first step across more than extend_max_gap by a slow or braking end (a "
+        "hover's pause) on, when at least three frames within hover_max_extent, must "
+        "scatter no more than hover_max_scatter, as a hovering drone's do; otherwise "
+        "they are given back: a tree crown's sparse returns beside the track's end "
+        "(deviation 131); false = not checked.",
     ),
     ParamSpec(
         "extend_denoised",

@@ -14,6 +14,7 @@ from clusterfilter_ros.core.offline import (
     occupied_spans,
     reachable_pieces,
     select_trimmed,
+    stop_between_pieces,
     tracked_spans,
 )
 from clusterfilter_ros.core.params import detector_params
@@ -499,3 +500,54 @@ def test_a_tight_sparse_hover_is_selected_offline_with_offline_tight_hover():
     assert np.abs(est.xyz - spot).max() < 0.2
     off = detect_offline(frames, detector_params({"offline_tight_hover": False}))
     assert len(off.estimates) == 0
+
+
+def _legs_and_stay(leave_from: np.ndarray, spread: float = 0.1):
+    """Take-off 6004 of the fifty-ninth set: a leg at 7 m/s towards a spot 32 m out
+    (cluster 0, 0-3 s, 5 returns a frame), five lone returns at the spot 7.0-8.9 s
+    (noise, within ``spread`` m), and a leg leaving from ``leave_from`` at 7 m/s
+    (cluster 1, 13-16 s). Returns (labels, xyz, t, scores, stay mask)."""
+    rng = np.random.default_rng(5)
+    spot = np.array([27.4, 10.1, 13.0])
+    way = np.array([0.85, 0.52, 0.1])
+    way /= np.linalg.norm(way)
+    t0 = np.repeat(np.arange(0.0, 3.0, 0.1), 5)
+    leg0 = spot - way * 7.0 * (7.0 - t0)[:, None]
+    t1 = np.repeat(np.arange(13.0, 16.0, 0.1), 5)
+    away = np.array([-0.89, 0.46, 0.0])
+    leg1 = leave_from + away * 7.0 * (t1 - 10.0)[:, None]
+    stay_t = np.array([7.0, 7.2, 8.0, 8.5, 8.9])
+    stay = spot + rng.uniform(-spread, spread, (5, 3))
+    xyz = (
+        np.vstack([leg0, leg1, stay])
+        + np.r_[rng.normal(0, 0.05, (t0.size + t1.size, 3)), np.zeros((5, 3))]
+    )
+    t = np.concatenate([t0, t1, stay_t])
+    labels = np.concatenate([np.zeros(t0.size, int), np.ones(t1.size, int), np.full(5, -1)])
+    scores = score_clusters(labels, xyz, t, detector_params(), n_clusters=2)
+    return labels, xyz, t, scores, labels < 0
+
+
+def test_a_stay_between_two_legs_joins_the_earlier_leg():
+    # Deviation 132: the leg before heads to the spot and the leg after leaves from it.
+    spot = np.array([27.4, 10.1, 13.0])
+    labels, xyz, t, scores, stay = _legs_and_stay(spot)
+    params = detector_params({"stop_bridge_gap": 20.0})
+    out = stop_between_pieces(labels, xyz, t, scores, [0, 1], params)
+    assert (out[stay] == 0).all() and (out[~stay] == labels[~stay]).all()
+    off = params.copy(stop_bridge_gap=0.0)
+    assert (stop_between_pieces(labels, xyz, t, scores, [0, 1], off) == labels).all()
+    # Pieces farther apart than stop_bridge_gap: not bridged.
+    near = params.copy(stop_bridge_gap=9.0)
+    assert (stop_between_pieces(labels, xyz, t, scores, [0, 1], near) == labels).all()
+
+
+def test_no_stay_where_the_next_leg_did_not_come_from_or_that_scatters():
+    # The leg after leaves from 40 m away (its way back misses the spot by more than
+    # 60 degrees); and returns spread 0.5 m about the spot (a crown's).
+    spot = np.array([27.4, 10.1, 13.0])
+    params = detector_params({"stop_bridge_gap": 20.0})
+    labels, xyz, t, scores, _ = _legs_and_stay(spot + np.array([0.0, -40.0, 0.0]))
+    assert (stop_between_pieces(labels, xyz, t, scores, [0, 1], params) == labels).all()
+    labels, xyz, t, scores, _ = _legs_and_stay(spot, spread=0.5)
+    assert (stop_between_pieces(labels, xyz, t, scores, [0, 1], params) == labels).all()

@@ -657,13 +657,14 @@ def _hover_with_a_pause(earlier: list[tuple[float, float]]) -> tuple[np.ndarray,
     """Take-off seed 2301 of the twenty-second fresh set: a drone hovering 35 m out, its
     returns once or twice a second, with a pause of 2.35 s (12.92 -> 15.27 s) longer than
     extend_max_gap. The track is the hover after the pause; ``earlier`` are (time, offset
-    along x in m) of returns before it. Returns (xyz, t), the track's first."""
+    along x in m) or (time, x, y, z offsets) of returns before it. Returns (xyz, t), the
+    track's first."""
     rng = np.random.default_rng(4)
     here = np.array([22.4, 22.2, 14.7])
     track_t = np.array([15.27, 15.76, 16.33, 16.88, 17.4, 17.9])
     track = here + rng.normal(0.0, 0.1, (track_t.size, 3))
     early_t = np.array([e[0] for e in earlier])
-    early = here + np.array([[e[1], 0.0, 0.0] for e in earlier])
+    early = here + np.array([[*e[1:], 0.0, 0.0][:3] for e in earlier]).reshape(-1, 3)
     return np.concatenate([track, early]), np.concatenate([track_t, early_t])
 
 
@@ -674,6 +675,31 @@ def test_extend_track_takes_a_hovering_drones_returns_across_a_longer_pause():
     assert grown.all()
     off = detector_params({"extend_hover_gap": 0.0})
     assert not extend_track(member, xyz, t, ~member, off)[~member].any()
+
+
+def test_a_hovering_end_gives_back_a_scattered_stay_taken_across_its_pause():
+    # `default` 6003 of the fifty-ninth set: a track's start grew back across a 1.7 s
+    # pause into a tree crown's returns, one a second spread 0.7 m (these five, about
+    # their mean), and the track was reported on the crown for 6 s. Deviation 131:
+    # returns taken from a long pause on that stay in place must scatter as a hovering
+    # drone's do (hover_max_scatter).
+    crown = [
+        (13.57, 0.76, -0.38, 0.42),
+        (13.08, 0.56, 0.22, -0.58),
+        (11.99, 0.46, 0.02, -0.08),
+        (10.67, -0.74, 0.12, 0.02),
+        (8.82, -1.04, 0.02, 0.22),
+    ]
+    xyz, t = _hover_with_a_pause(crown)
+    member = t > 15.0
+    on = detector_params()
+    off = detector_params({"extend_stay_scatter": False})
+    assert extend_track(member, xyz, t, ~member, off)[~member].all()
+    assert not extend_track(member, xyz, t, ~member, on)[~member].any()
+    # The drone's own returns at the spot (0.1 m apart) are kept.
+    xyz, t = _hover_with_a_pause([(11.38, 0.0), (11.87, 0.1), (12.37, -0.1), (12.92, 0.0)])
+    member = t > 15.0
+    assert extend_track(member, xyz, t, ~member, on)[~member].all()
 
 
 @pytest.mark.parametrize(
