@@ -514,6 +514,16 @@ def continuing_pieces(
     return added
 
 
+def _heads_to(origin: np.ndarray, velocity: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(M,) bool: whether ``velocity`` at ``origin`` points at each of ``targets`` (M, 3)
+    within 60 degrees (all False for an unknown or zero velocity)."""
+    speed = float(np.linalg.norm(velocity))
+    if not speed > 0:  # NaN velocity: unknown
+        return np.zeros(len(targets), dtype=bool)
+    way = np.asarray(targets, dtype=np.float64).reshape(-1, 3) - origin
+    return way @ velocity >= 0.5 * speed * np.linalg.norm(way, axis=1)
+
+
 def lead_in_piece(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -560,7 +570,7 @@ def lead_in_piece(
         speed = float(np.linalg.norm(ends.v_last))
         if not (distance <= reach and speed > 0):  # NaN velocity: unknown, not taken
             continue
-        if float(np.dot(ends.v_last, way)) < 0.5 * speed * distance:
+        if not _heads_to(ends.p_last, ends.v_last, track.p_first)[0]:
             continue
         # Where it was heading, the track's start within the linking reach: an arrival
         # at 11 m/s cannot have stopped 4 m further on in 3.5 s (link_max_accel).
@@ -569,17 +579,6 @@ def lead_in_piece(
         if miss <= float(linking_reach(np.asarray(dt), params)):
             return [int(c)]
     return []
-
-
-def _heads_to(origin: np.ndarray, velocity: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """(M,) bool: whether ``velocity`` at ``origin`` points at each of ``targets`` (M, 3)
-    within 60 degrees (all False for an unknown or zero velocity)."""
-    speed = float(np.linalg.norm(velocity))
-    if not speed > 0:  # NaN velocity: unknown
-        return np.zeros(len(targets), dtype=bool)
-    way = np.asarray(targets, dtype=np.float64) - origin
-    distance = np.linalg.norm(way, axis=1)
-    return (distance > 0) & (way @ velocity >= 0.5 * speed * distance)
 
 
 def stop_between_pieces(
