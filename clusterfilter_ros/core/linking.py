@@ -486,6 +486,9 @@ def extend_track(
     moving takes, across gaps up to ``extend_hover_gap``, a return where braking would
     have stopped it (:func:`_braking_offsets`) that another pool return confirms there
     within ``max_gap``: a drone braking into a hover, then seen in lone returns.
+    With ``extend_stay_scatter``, the returns taken in one direction from the first
+    step across more than the usual gap by a slow or braking end on are given back if
+    they stay in place and scatter more than a drone's body (:func:`_scattered_stay`).
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
     the end. ``grow_end`` False: grow the start only; ``grow_start`` False: the end
     only. Returns the new member mask.

@@ -598,12 +598,13 @@ def stop_between_pieces(
     ``min_centroid_z``, where the earlier piece's end was heading and the later piece's
     start came from (its velocity, each within 60 degrees of the way to the return), no
     farther from either than ``link_gate`` plus its speed times the time between, are
-    candidates; the one with the most
-    frames of candidates within ``stream_hover_max_extent`` of it, if at least three
-    within a box that size, and scattering no more than ``hover_max_scatter``
-    (:func:`~.scoring.local_scatter`), is the stay. A drone flying on to a spot 32 m
-    out, staying there 2 s, then flying on, is seen neither on the way nor enough to be
-    a cluster there; growth does not cross the seconds before and after the stay."""
+    candidates. The candidate with the most frames of candidates within
+    ``stream_hover_max_extent`` of it, with those candidates, is the stay if they span
+    at least three frames within a box that size and scatter no more than
+    ``hover_max_scatter`` (:func:`~.scoring.local_scatter`). A drone flying on to a
+    spot 32 m out, staying there 2 s, then flying on, is seen neither on the way nor
+    enough to be a cluster there; growth does not cross the seconds before and after
+    the stay."""
     limit = float(params.stop_bridge_gap)
     if limit <= 0 or len(selected) < 2:
         return labels
