@@ -208,24 +208,17 @@ def absorb_colocated_noise(
     inside = member[compact[labels[member]]]
     if inside.size == 0:
         return labels
-    tree = cKDTree(pts[inside])
-    if t is None or max_gap is None:
-        dist, nearest = tree.query(pts[noise], distance_upper_bound=radius)
-        hit = np.isfinite(dist)
-        if not hit.any():
-            return labels
-        out = labels.copy()
-        out[noise[hit]] = labels[inside[nearest[hit]]]
-        return out
-    stamps = np.asarray(t, dtype=np.float64).reshape(-1)
-    ((first, last),) = group_bounds(labels[member], k, stamps[member])
-    n_near = min(_ABSORB_NEIGHBOURS, inside.size)
-    dist, nearest = tree.query(pts[noise], k=n_near, distance_upper_bound=radius)
+    timed = t is not None and max_gap is not None
+    n_near = min(_ABSORB_NEIGHBOURS, inside.size) if timed else 1
+    dist, nearest = cKDTree(pts[inside]).query(pts[noise], k=n_near, distance_upper_bound=radius)
     dist, nearest = dist.reshape(noise.size, n_near), nearest.reshape(noise.size, n_near)
-    found = np.isfinite(dist)  # sorted by distance; misses are inf
-    c = labels[inside[np.where(found, nearest, 0)]]
-    ts = stamps[noise][:, None]
-    ok = found & (first[c] - max_gap <= ts) & (ts <= last[c] + max_gap)
+    ok = np.isfinite(dist)  # sorted by distance; misses are inf
+    c = labels[inside[np.where(ok, nearest, 0)]]
+    if timed:
+        stamps = np.asarray(t, dtype=np.float64).reshape(-1)
+        ((first, last),) = group_bounds(labels[member], k, stamps[member])
+        ts = stamps[noise][:, None]
+        ok &= (first[c] - max_gap <= ts) & (ts <= last[c] + max_gap)
     hit = ok.any(axis=1)
     if not hit.any():
         return labels

@@ -515,6 +515,7 @@ def extend_track(
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
         stay = np.zeros(pool_idx.size, dtype=bool)  # taken since the first long pause
+        paused = False
         while True:
             m = np.nonzero(inner)[0]
             edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
@@ -608,8 +609,8 @@ def extend_track(
             # The nearest frame in time among the reachable points joins the track.
             near_t = adt[ok].min()
             join = cand[ok & (adt <= near_t + fp / 2)]
-            if stay.any() or (near_t > gap and (slow or braking)):
-                stay[join] = True
+            paused = paused or (near_t > gap and (slow or braking))
+            stay[join] = paused
             taken[join] = True
             member[pool_idx[join]] = True
             inner[pool_idx[join]] = True
@@ -619,19 +620,30 @@ def extend_track(
     return member
 
 
+def stay_scatter(
+    xyz: np.ndarray, t: np.ndarray, max_extent: float, frame_period: float
+) -> float | None:
+    """The scatter (:func:`~.scoring.local_scatter`) of returns that stay in place: at
+    least three frame samples (:func:`frame_sample_ids`) within a bounding box of
+    ``max_extent``; None for returns that are no such stay."""
+    if t.size < 3 or float(np.ptp(xyz, axis=0).max()) > max_extent:
+        return None
+    group = np.zeros(t.size, dtype=np.int64)
+    if int(frame_sample_ids(group, t, frame_period).max()) < 2:
+        return None
+    return float(local_scatter(group, xyz, t, 1)[0])
+
+
 def _scattered_stay(xyz: np.ndarray, t: np.ndarray, params: ParamSet) -> bool:
     """Whether returns a growing end took after a hover's pause (deviation 131) are a
-    stay in place (at least three frames, bounding box within ``hover_max_extent``) that
-    scatters more than ``hover_max_scatter`` (:func:`~.scoring.local_scatter`): a tree
-    crown seen a return at a time, not a hovering drone, whose returns lie on its body."""
+    stay in place (:func:`stay_scatter` within ``hover_max_extent``) that scatters more
+    than ``hover_max_scatter``: a tree crown seen a return at a time, not a hovering
+    drone, whose returns lie on its body."""
     limit = float(params.hover_max_scatter)
-    if limit <= 0 or t.size < 3:
+    if limit <= 0:
         return False
-    frames = np.unique(np.round(t / float(params.frame_period)))
-    if frames.size < 3 or float(np.ptp(xyz, axis=0).max()) > params.hover_max_extent:
-        return False
-    scatter = local_scatter(np.zeros(t.size, dtype=np.int64), xyz, t, 1)
-    return bool(scatter[0] > limit)
+    scatter = stay_scatter(xyz, t, params.hover_max_extent, params.frame_period)
+    return scatter is not None and scatter > limit
 
 
 #: Slowest end (m/s) that grows across gaps up to ``extend_far_gap`` while leaving.

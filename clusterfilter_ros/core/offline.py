@@ -50,18 +50,15 @@ from clusterfilter_ros.core.linking import (
     chains_formed,
     extend_track,
     fill_track,
+    frame_sample_ids,
     frame_samples,
     link_fragments,
     linking_reach,
+    stay_scatter,
 )
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import points_at, usable_and_below_floor
-from clusterfilter_ros.core.scoring import (
-    ClusterScores,
-    local_scatter,
-    score_clusters,
-    select_clusters,
-)
+from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import (
     Scorer,
     score_pieces,
@@ -626,17 +623,16 @@ def stop_between_pieces(
             continue
         idx = np.flatnonzero(pool & (t > before.last) & (t < after.first))
         pts = xyz[idx].astype(np.float64)
-        heading = _heads_to(before.p_last, before.v_last, pts)
-        heading &= _heads_to(after.p_first, -after.v_first, pts)
-        # No faster than the pieces flew: at most their speeds over the time between.
+        heading = pts[:, 2] >= params.min_centroid_z
         gate = float(params.link_gate)
-        heading &= np.linalg.norm(pts - before.p_last, axis=1) <= gate + np.linalg.norm(
-            before.v_last
-        ) * (t[idx] - before.t_last)
-        heading &= np.linalg.norm(pts - after.p_first, axis=1) <= gate + np.linalg.norm(
-            after.v_first
-        ) * (after.t_first - t[idx])
-        heading &= pts[:, 2] >= params.min_centroid_z
+        # Where the earlier piece was heading and the later one came from, no farther
+        # than each flew by then at its speed.
+        for origin, velocity, dt in (
+            (before.p_last, before.v_last, t[idx] - before.t_last),
+            (after.p_first, -after.v_first, after.t_first - t[idx]),
+        ):
+            heading &= _heads_to(origin, velocity, pts)
+            heading &= np.linalg.norm(pts - origin, axis=1) <= gate + np.linalg.norm(velocity) * dt
         idx, pts = idx[heading], pts[heading]
         if idx.size < 3:
             continue
@@ -644,15 +640,13 @@ def stop_between_pieces(
         pairs = cKDTree(pts).query_pairs(extent, output_type="ndarray")
         a = np.concatenate([np.arange(idx.size), pairs[:, 0], pairs[:, 1]])
         b = np.concatenate([np.arange(idx.size), pairs[:, 1], pairs[:, 0]])
-        frames = np.round(t[idx] / fp).astype(np.int64)
+        frames = frame_sample_ids(np.zeros(idx.size, np.int64), t[idx], fp)
         seen = np.unique(np.column_stack([a, frames[b]]), axis=0)
-        counts = np.bincount(seen[:, 0], minlength=idx.size)
-        best = int(np.argmax(counts))
-        stay = np.unique(np.r_[best, b[a == best]])
-        stay = idx[stay]
-        if counts[best] < 3 or float(np.ptp(xyz[stay], axis=0).max()) > extent:
+        best = int(np.argmax(np.bincount(seen[:, 0], minlength=idx.size)))
+        stay = idx[np.unique(np.r_[best, b[a == best]])]
+        scatter = stay_scatter(xyz[stay], t[stay], extent, fp)
+        if scatter is None:
             continue
-        scatter = local_scatter(np.zeros(stay.size, np.int64), xyz[stay], t[stay], 1)[0]
         if params.hover_max_scatter > 0 and scatter > params.hover_max_scatter:
             continue
         out[stay] = before.cluster
