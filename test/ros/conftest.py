@@ -87,7 +87,7 @@ class Rig:
         from rclpy.parameter import Parameter
 
         from clusterfilter_ros.ros.node import OUTPUT_QOS, DetectorNode
-        from clusterfilter_ros.ros.record import PoseRecorder
+        from clusterfilter_ros.ros.record import RECORD_QOS, PoseRecorder
         from clusterfilter_ros.ros.replay import Replayer
 
         values = {"recluster_in_background": False, **(overrides or {})}
@@ -97,7 +97,9 @@ class Rig:
         self.replayer = Replayer(self.client)
         self.recorder = PoseRecorder(self.client, points_topic="/uav/points")
         self.paths: list[PathMsg] = []
-        self.client.create_subscription(PathMsg, "/uav/path", self.paths.append, OUTPUT_QOS)
+        # As deep a queue as the pose recorder's: with the node's own depth of 10, a client
+        # spun late on a loaded machine lost paths the detector had published.
+        self.client.create_subscription(PathMsg, "/uav/path", self.paths.append, RECORD_QOS)
         self.diagnostics: list[DiagnosticArray] = []
         self.client.create_subscription(
             DiagnosticArray, "/diagnostics", self.diagnostics.append, OUTPUT_QOS
