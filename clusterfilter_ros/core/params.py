@@ -1504,6 +1504,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "for the live run after the one that reported them. false = dropped.",
     ),
     ParamSpec(
+        "report_next_dropped",
+        "bool",
+        True,
+        "report_lag, with report_next_run: a reported track that a re-clustering dropped "
+        "(no confident track after it) and that the live output held too briefly to keep "
+        "(report_backfill_min_run) is treated as a replaced track's newer returns are: a "
+        "frame it reached that, when due, no kept track reaches waits for the live run "
+        "after the one that reported it, and is estimated from a track of that run or one "
+        "such a track could continue, only within track_gate of where the dropped track "
+        "was. A drone whose confidence dipped for a moment is no reason to give up the "
+        "frames its track held. false = dropped.",
+    ),
+    ParamSpec(
         "report_bridge",
         "bool",
         True,

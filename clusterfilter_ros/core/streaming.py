@@ -117,6 +117,9 @@ class _HeldFrame:
     new_run: bool = False  # before a new live run (report_hold_new_runs, deviation 107)
     # report_next_run: the live run it waits for begins after this stamp (deviation 110).
     after: float = -math.inf
+    # report_next_dropped: the dropped track that reached it; its estimate must agree
+    # with where that track was (deviation 133).
+    dropped: _TrackPiece | None = None
 
 
 @dataclass
@@ -477,10 +480,11 @@ class StreamingDetector:
         # report_lag: earlier pieces of reported tracks, for the frames waiting for their
         # delayed estimate that the current track no longer reaches (oldest first).
         self._archive: deque[_TrackPiece] = deque(maxlen=_MAX_ARCHIVED)
-        # report_next_run: (first sample time, newest live report) of newer returns that
-        # report_keep_newer did not keep (held live too briefly): a frame they reached
-        # waits for the next live run instead of being dropped (deviation 112).
-        self._unkept: deque[tuple[float, float]] = deque(maxlen=_MAX_ARCHIVED)
+        # report_next_run: (first sample time, newest live report, dropped track or None)
+        # of newer returns that report_keep_newer did not keep, and of dropped tracks
+        # (report_next_dropped), held live too briefly: a frame they reached waits for the
+        # next live run instead of being dropped (deviations 112 and 133).
+        self._unkept: deque[tuple[float, float, _TrackPiece | None]] = deque(maxlen=_MAX_ARCHIVED)
         # report_lag: (stamp, position) of push()'s recent estimates, to tell which kept
         # piece the live output reported.
         self._live_reports: deque[tuple[float, np.ndarray]] = deque(maxlen=_MAX_LAGGED)
@@ -884,6 +888,11 @@ class StreamingDetector:
         # With no current track, ``piece`` holds all of ``old_track``: rejected unless lost.
         if not current and (piece is None or not self._survives_drop(piece, now)):
             self._archive.clear()
+            if piece is not None and p.report_next_dropped:
+                # Deviation 133: the frames it reached wait for the next live run, as a
+                # replaced track's unkept newer returns do (deviation 112), for an
+                # estimate where it was.
+                self._remember_unkept(piece, dropped=True)
             return
         if piece is not None:
             until = self._reported_until(piece)
@@ -907,8 +916,20 @@ class StreamingDetector:
         until = self._reported_until(piece)
         if self._survives_drop(piece, now):
             self._archive.append(dataclasses.replace(piece, reported_until=until))
-        elif until > -math.inf:
-            self._unkept.append((float(piece.ts[0]), until))
+        else:
+            self._remember_unkept(piece, until)
+
+    def _remember_unkept(
+        self, piece: _TrackPiece, until: float | None = None, dropped: bool = False
+    ) -> None:
+        """report_next_run: the span from ``piece``'s first sample to its newest live
+        report (``until``; computed if None), if push() reported it at all. A frame in it
+        that no kept track reaches when due waits for the live run after that report
+        (deviation 112); for a ``dropped`` track, to be estimated where the piece was
+        (deviation 133)."""
+        until = self._reported_until(piece) if until is None else until
+        if until > -math.inf:
+            self._unkept.append((float(piece.ts[0]), until, piece if dropped else None))
 
     def _survives_drop(self, piece: _TrackPiece, now: float) -> bool:
         """Whether a reported track's samples ``piece``, no longer the track after the
@@ -1258,10 +1279,13 @@ class StreamingDetector:
                 # Deviation 112: returns not kept reached this frame; it waits for the
                 # live run after the one that reported them, as a frame whose run ended
                 # too soon does.
-                reported = max((u for t0, u in self._unkept if t0 <= stamp <= u), default=None)
-                run = None if reported is None else self._live_run(reported)
-                if run is not None:
-                    self._held.append(_HeldFrame(stamp, after=_after_run(run)))
+                spans = [(u, piece) for t0, u, piece in self._unkept if t0 <= stamp <= u]
+                if spans:
+                    reported, dropped = max(spans, key=lambda span: span[0])
+                    run = self._live_run(reported)
+                    if run is not None:
+                        held = _HeldFrame(stamp, after=_after_run(run), dropped=dropped)
+                        self._held.append(held)
         self._resolve_held(until)
 
     def _resolve_held(self, until: float) -> None:
@@ -1320,6 +1344,8 @@ class StreamingDetector:
                 # such a track could continue (deviation 110).
                 since = run[0] if waits_next and run is not None else -math.inf
                 frame.estimate = self._tracks_estimate(stamp, tracks, least, since)
+                if frame.dropped is not None and not self._agrees(frame.estimate, frame.dropped):
+                    frame.estimate = None
             if frame.estimate is None and short and not lasted and p.report_next_run:
                 # Deviation 110: the run ended too soon; wait for the next one.
                 assert run is not None
@@ -1369,6 +1395,28 @@ class StreamingDetector:
             and _could_continue(track, later, self.params)
             for later in tracks
         )
+
+    def _agrees(self, estimate: Estimate | None, piece: _TrackPiece) -> bool:
+        """Deviation 133: whether ``estimate`` lies within ``track_gate`` of where the
+        dropped track ``piece`` was at its stamp (:func:`smoothed_position`; not where
+        the piece gives no position) and of push()'s own estimates within half a frame
+        period of that stamp, if there were any: the late output confirms the object the
+        live output reported there, not another one a later track holds."""
+        if estimate is None:
+            return False
+        p = self.params
+        position = smoothed_position(piece.ts, piece.ps, piece.ws, estimate.stamp, p)
+        if position is None:
+            return False
+        where = [reported_positions(position, p)[0]]
+        reports = self._live_reports
+        half = 0.5 * float(p.frame_period)
+        i = bisect.bisect_left(reports, estimate.stamp - half, key=lambda r: r[0])
+        while i < len(reports) and reports[i][0] <= estimate.stamp + half:
+            where.append(reports[i][1])
+            i += 1
+        gaps = np.linalg.norm(np.asarray(where) - estimate.position, axis=1)
+        return bool((gaps <= p.track_gate).all())
 
     def _bridges(self, stamp: float, track: _TrackPiece) -> bool:
         """report_bridge: whether push() reported positions on ``track``

@@ -1057,7 +1057,7 @@ def test_a_frame_reached_only_by_newer_returns_not_kept_waits_for_the_next_run(n
     for stamp in np.arange(9.5, 12.05, 0.1):
         det._live_reports.append((float(stamp), np.zeros(3)))
     det._last_live = det._live_reports[-1][0]
-    det._unkept.append((9.0, 11.0))
+    det._unkept.append((9.0, 11.0, None))
     det._lagged.extend([8.5, 10.0])
     det._release_delayed(10.0)
     if not next_run:
@@ -1066,6 +1066,73 @@ def test_a_frame_reached_only_by_newer_returns_not_kept_waits_for_the_next_run(n
     (held,) = det._held  # 8.5 lies before the returns: dropped as before
     last = det._live_reports[-1][0]  # that run's last estimate (12.0 in float steps)
     assert held.stamp == 10.0 and not held.decided and held.after > last  # after that run
+    assert held.dropped is None  # newer returns of a replaced track: no agreement asked
+
+
+@pytest.mark.parametrize("next_dropped", [True, False])
+def test_a_dropped_track_held_live_briefly_leaves_its_span_to_wait_for_the_next_run(
+    next_dropped,
+):
+    # Deviation 133: a re-clustering dropped the reported track (no confident track
+    # after it) 1.5 s after its newest return, and the live output had held it for 1 s
+    # only, so its samples are forgotten (deviation 93). With report_next_dropped the
+    # span from its first sample to its newest live estimate is remembered as unkept,
+    # so that a frame in it that finds no track when due waits for the next live run
+    # (deviation 112's path) instead of being dropped.
+    old = _old_track(np.arange(1.0, 4.9, 0.1))  # newest return at 4.8 s
+    det = _detector_with([])
+    det.params = det.params.copy(report_next_dropped=next_dropped)
+    det._live_reports.extend((t, _line(np.array([t]))[0]) for t in np.arange(3.5, 4.55, 0.1))
+    det._now = 4.8 + 1.5
+    det._archive_piece(old, 0.8, det._now)
+    assert len(det._archive) == 0  # forgotten either way
+    if not next_dropped:
+        assert not det._unkept
+        return
+    ((first, until, piece),) = det._unkept
+    assert abs(first - 1.0) < 1e-9 and abs(until - 4.5) < 1e-9
+    assert piece.ts.size == 39  # kept for the agreement test of the frames it holds
+    # A frame in that span, due with no track, waits for the next run with the piece.
+    det._lagged.append(3.0)
+    det._last_live = det._live_reports[-1][0]
+    det._release_delayed(3.0)
+    (held,) = det._held
+    assert held.stamp == 3.0 and held.dropped is piece and held.after > det._last_live
+
+
+def test_a_held_frame_of_a_dropped_track_takes_only_an_estimate_where_it_was():
+    # Deviation 133: the next run's track must put the frame within track_gate of where
+    # the dropped track was; not 8 m off (another object), and not where the dropped
+    # track gives no position at all; nor away from what the live output reported there.
+    det = _detector_with([])
+    ts = np.arange(1.0, 4.9, 0.1)
+    piece = _piece(ts, _line(ts))
+    at = _line(np.array([3.0]))[0]
+    assert det._agrees(Estimate(3.0, at + [0.0, 1.5, 0.0], 0.8, 5), piece)
+    assert not det._agrees(Estimate(3.0, at + [0.0, 8.0, 0.0], 0.8, 5), piece)
+    assert not det._agrees(Estimate(9.0, _line(np.array([9.0]))[0], 0.8, 5), piece)
+    assert not det._agrees(None, piece)
+    # Where the live output reported a position at that stamp (within half a frame
+    # period), the estimate must lie near it too: not the dropped track's other object.
+    det._live_reports.append((3.02, at + [0.0, 6.0, 0.0]))
+    assert not det._agrees(Estimate(3.0, at, 0.8, 5), piece)
+    assert det._agrees(Estimate(3.1, _line(np.array([3.1]))[0], 0.8, 5), piece)  # 0.08 s off
+    det._live_reports.append((3.18, _line(np.array([3.2]))[0]))
+    assert det._agrees(Estimate(3.2, _line(np.array([3.2]))[0], 0.8, 5), piece)
+
+
+def test_a_dropped_track_never_reported_live_leaves_nothing_to_wait_for():
+    # The live output never reported it: no frame can have been due on it.
+    det = _detector_with([])
+    det._now = 4.8 + 1.5
+    det._archive_piece(_old_track(np.arange(1.0, 4.9, 0.1)), 0.8, det._now)
+    assert not det._archive and not det._unkept
+    # Reported live, but 8 m off its track (another object): nothing either.
+    det._live_reports.extend(
+        (t, _line(np.array([t]))[0] + [0.0, 8.0, 0.0]) for t in np.arange(3.5, 4.55, 0.1)
+    )
+    det._archive_piece(_old_track(np.arange(1.0, 4.9, 0.1)), 0.8, det._now)
+    assert not det._unkept
 
 
 def test_after_a_reset_the_stream_is_backfilled_as_a_new_one(scene):
