@@ -578,6 +578,13 @@ def lead_in_piece(
     return []
 
 
+def _unscored(labels: np.ndarray, scores: ClusterScores, params: ParamSet) -> np.ndarray:
+    """(N,) bool: the returns too few to be scored, noise and clusters below
+    ``min_cluster_points``; what growth and the stays between pieces may take."""
+    small = scores.n_points < params.min_cluster_points
+    return (labels < 0) | small[np.maximum(labels, 0)]
+
+
 def stop_between_pieces(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -605,8 +612,7 @@ def stop_between_pieces(
     limit = float(params.stop_bridge_gap)
     if limit <= 0 or len(selected) < 2:
         return labels
-    small = scores.n_points < params.min_cluster_points
-    pool = ((labels < 0) | small[np.maximum(labels, 0)]) & ~np.isin(labels, selected)
+    pool = _unscored(labels, scores, params) & ~np.isin(labels, selected)
     if exclude is not None:
         pool &= ~exclude
     pieces = []
@@ -676,8 +682,7 @@ def extend_selected(
     it has landed a person walking past must not continue its track."""
     # Only what is too small to be judged on its own: a cluster that was scored and
     # rejected (an erratic bird, say) must not extend a track.
-    small = scores.n_points < params.min_cluster_points
-    pool = (labels < 0) | small[np.maximum(labels, 0)]
+    pool = _unscored(labels, scores, params)
     # Inside the track's span, returns close to its path join it whatever cluster they
     # were put in: a bird passing a hovering drone takes the drone's returns into its own
     # cluster for seconds (deviation 54).
