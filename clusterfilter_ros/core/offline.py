@@ -511,6 +511,105 @@ def continuing_pieces(
     return added
 
 
+def _carries_on(before: _PieceEnds, after: _PieceEnds, params: ParamSet) -> bool:
+    """Whether ``after`` starts where ``before`` was heading: :func:`_joinable`, and each
+    known facing velocity (``before``'s forward, ``after``'s backward) carries one end to
+    within the linking reach (:func:`~clusterfilter_ros.core.linking.linking_reach`) of
+    the other across the gap: not only a piece one flight could reach at up to
+    ``link_max_speed``, but one on the way the track was going."""
+    if not _joinable(before, after, params):
+        return False
+    dt = after.t_first - before.t_last
+    reach = float(linking_reach(np.asarray(dt), params))
+    for miss in (
+        after.p_first - (before.p_last + before.v_last * dt),
+        before.p_last - (after.p_first - after.v_first * dt),
+    ):
+        if float(np.linalg.norm(miss)) > reach:  # NaN velocity: unknown, kept
+            return False
+    return True
+
+
+def bridging_pieces(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    was_split: np.ndarray,
+    params: ParamSet,
+) -> list[int]:
+    """bridge_split_pieces (deviation 134): the pieces of split clusters that carry one
+    flight across the gap between two consecutive selected pieces. Between them (in
+    time), the unselected pieces made only of split points (``was_split``), flying
+    (centroid above ``min_centroid_z``), within ``max_local_extent``, with a velocity
+    at both ends (at least :data:`END_POINTS` returns over a third of
+    :data:`VELOCITY_WINDOW`), are chained: each step from one piece's end to the next
+    one's start at most ``link_max_gap`` long and on the way each end was going
+    (:func:`_carries_on`), from the earlier selected piece to the later one. Of the chains
+    that reach it, the one with the most returns is taken. Where a bird's returns made
+    the split cut a drone's sparse track, the pieces between two selected ones are
+    often below ``min_cluster_points`` or ``min_confidence`` each; joined end to end
+    to both neighbours, they are that track. Returns the pieces to add."""
+    if not params.bridge_split_pieces or len(selected) < 2:
+        return []
+    pieces = []
+    for c in selected:
+        member = labels == c
+        if member.any():
+            pieces.append(_piece_ends(c, t[member], xyz[member]))
+    pieces.sort(key=lambda e: e.first)
+    pool = (
+        (scores.n_points >= END_POINTS)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+        & (scores.local_extent <= params.max_local_extent)
+    )
+    pool[[c for c in selected if c < pool.size]] = False
+    split_only = np.ones(pool.size, dtype=bool)
+    inside = labels >= 0
+    split_only[np.unique(labels[inside & ~was_split])] = False
+    pool &= split_only
+    reach = float(params.link_max_gap)
+    added: list[int] = []
+    for before, after in zip(pieces[:-1], pieces[1:], strict=True):
+        between = np.flatnonzero(
+            pool & (scores.t_first > before.last) & (scores.t_last < after.first)
+        )
+        if between.size == 0 or after.first - before.last <= 0:
+            continue
+        nodes = [before]
+        for c in between:
+            member = labels == c
+            ends = _piece_ends(int(c), t[member], xyz[member])
+            # A piece of one or two frames has no velocity to show it went the
+            # track's way, and distance alone reaches a bird's returns 7 m off.
+            if np.isfinite(ends.v_first).all() and np.isfinite(ends.v_last).all():
+                nodes.append(ends)
+        nodes[1:] = sorted(nodes[1:], key=lambda e: e.first)
+        # Best chain (most returns) from `before` to each node; None: unreachable.
+        best: list[tuple[int, list[int]] | None] = [(0, [])] + [None] * (len(nodes) - 1)
+        for j in range(1, len(nodes)):
+            for i in range(j):
+                if best[i] is None:
+                    continue
+                a, b = nodes[i], nodes[j]
+                if not (a.last < b.first <= a.last + reach and _carries_on(a, b, params)):
+                    continue
+                points = best[i][0] + int(scores.n_points[b.cluster])
+                if best[j] is None or points > best[j][0]:
+                    best[j] = (points, best[i][1] + [b.cluster])
+        chains = [
+            best[j]
+            for j in range(1, len(nodes))
+            if best[j] is not None
+            and nodes[j].last < after.first <= nodes[j].last + reach
+            and _carries_on(nodes[j], after, params)
+        ]
+        if chains:
+            added += max(chains, key=lambda chain: chain[0])[1]
+    return added
+
+
 def _heads_to(origin: np.ndarray, velocity: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """(M,) bool: whether ``velocity`` at ``origin`` points at each of ``targets`` (M, 3)
     within 60 degrees (all False for an unknown or zero velocity)."""
@@ -902,6 +1001,7 @@ def detect_offline(
     )
     if was_split is not None:
         selected += continuing_pieces(labels, xyz, t, scores, selected, was_split, params)
+        selected += bridging_pieces(labels, xyz, t, scores, selected, was_split, params)
     lead_in = lead_in_piece(labels, xyz, t, scores, selected, params)
     selected += lead_in
     rows = scores.rows()

@@ -422,6 +422,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=600.0,
     ),
     ParamSpec(
+        "bridge_split_pieces",
+        "bool",
+        True,
+        "Offline: where the kinematic split (split_merged) cut a cluster into pieces, "
+        "the pieces too small or too unconfident to be selected that together carry one "
+        "flight from a selected piece's end to the next selected piece's start are "
+        "reported with them. Each piece must have a velocity at both ends, and each step "
+        "must be at most link_max_gap long and lie where both ends were heading "
+        "(link_gate + link_max_accel x gap^2 / 2 from where each end's velocity carries "
+        "it): a drone's 17 and 9 returns between two pieces of its track, cut off by a "
+        "bird's returns (deviation 134); false = not bridged.",
+    ),
+    ParamSpec(
         "lead_in_reach",
         "float",
         10.0,

@@ -8,6 +8,7 @@ import numpy as np
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
 from clusterfilter_ros.core.offline import (
+    bridging_pieces,
     continuing_pieces,
     detect_offline,
     lead_in_piece,
@@ -272,6 +273,57 @@ def test_a_weaker_piece_after_a_long_gap_off_the_track_or_overlapping_is_not_add
         continuing_pieces(labels, xyz, t, scores, [0], labels == 1, params.copy(extend_max_gap=0.0))
         == []
     )
+
+
+def _track_in_pieces(lift: float = 0.0):
+    """A drone at 4 m/s along x, 20 m up, one return per frame at 10 Hz, seen in four
+    pieces: 0-4 s and 11-15 s (clusters 0 and 3, selected), 5.5-7 s and 8.5-9.5 s
+    between them (clusters 1 and 2, the second ``lift`` m higher); cluster 4, a bird
+    20 m off the track during 5.5-9.5 s."""
+    params = detector_params()
+    path = lambda t: np.column_stack([4.0 * t, np.zeros_like(t), np.full_like(t, 20.0)])  # noqa: E731
+    spans = [(0.0, 4.0), (5.5, 7.0), (8.5, 9.5), (11.0, 15.0)]
+    stamps = [np.arange(a, b + 1e-9, 0.1) for a, b in spans]
+    parts = [path(s) for s in stamps]
+    parts[2] = parts[2] + [0.0, 0.0, lift]
+    bird_t = np.arange(5.5, 9.5, 0.1)
+    parts.append(path(bird_t) + [0.0, 20.0, 0.0])
+    stamps.append(bird_t)
+    xyz, t = np.vstack(parts), np.concatenate(stamps)
+    labels = np.repeat(np.arange(5), [s.size for s in stamps])
+    scores = score_clusters(labels, xyz, t, params, n_clusters=5)
+    return labels, xyz, t, scores, params
+
+
+def test_split_pieces_carrying_the_track_between_two_selected_pieces_join_it():
+    labels, xyz, t, scores, params = _track_in_pieces()
+    split = labels > 0
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], split, params) == [1, 2]
+    assert bridging_pieces(labels, xyz, t, scores, [3, 0], split, params) == [1, 2]
+    off = params.copy(bridge_split_pieces=False)
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], split, off) == []
+    # One selected piece: nothing to bridge.
+    assert bridging_pieces(labels, xyz, t, scores, [0], split, params) == []
+    # Pieces not made only of split points are tracks of their own.
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], labels == 4, params) == []
+
+
+def test_no_bridge_with_a_step_off_the_track_or_too_long():
+    # The second piece 20 m above the track: no chain reaches the later piece.
+    labels, xyz, t, scores, params = _track_in_pieces(lift=20.0)
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], labels > 0, params) == []
+    # Without the second piece the step from the first to the later piece is 4 s.
+    labels, xyz, t, scores, params = _track_in_pieces()
+    split = (labels == 1) | (labels == 4)
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], split, params) == []
+    # Steps of 1.5 s: none with link_max_gap 1 s.
+    near = params.copy(link_max_gap=1.0)
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], labels > 0, near) == []
+    # The second piece's eleven returns in one instant: no velocity to show it went the
+    # track's way, and the first piece alone is 4 s from the later one.
+    t = np.where(labels == 2, 9.0, t)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=5)
+    assert bridging_pieces(labels, xyz, t, scores, [0, 3], labels > 0, params) == []
 
 
 def test_occupied_spans_break_at_gaps_over_the_limit():
