@@ -413,6 +413,19 @@ def _joinable(before: _PieceEnds, after: _PieceEnds, params: ParamSet) -> bool:
     return not dv > params.link_max_accel * (gap + 2 * VELOCITY_WINDOW)  # NaN: unknown, kept
 
 
+def _selected_ends(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, selected: list[int]
+) -> list[_PieceEnds]:
+    """The ends (:func:`_piece_ends`) of each of the ``selected`` clusters that has points,
+    in the order given."""
+    out = []
+    for c in selected:
+        member = labels == c
+        if member.any():
+            out.append(_piece_ends(c, t[member], xyz[member]))
+    return out
+
+
 def reachable_pieces(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -483,11 +496,7 @@ def continuing_pieces(
     )
     if not selected or not weak.any():
         return []
-    neighbours = []
-    for c in selected:
-        member = labels == c
-        if member.any():
-            neighbours.append(_piece_ends(c, t[member], xyz[member]))
+    neighbours = _selected_ends(labels, xyz, t, selected)
     taken = list(neighbours)  # and the weak pieces added
     gap = float(params.extend_max_gap)
     added: list[int] = []
@@ -553,12 +562,7 @@ def bridging_pieces(
     to both neighbours, they are that track. Returns the pieces to add."""
     if not params.bridge_split_pieces or len(selected) < 2:
         return []
-    pieces = []
-    for c in selected:
-        member = labels == c
-        if member.any():
-            pieces.append(_piece_ends(c, t[member], xyz[member]))
-    pieces.sort(key=lambda e: e.first)
+    pieces = sorted(_selected_ends(labels, xyz, t, selected), key=lambda e: e.first)
     pool = (
         (scores.n_points >= END_POINTS)
         & (scores.centroid[:, 2] >= params.min_centroid_z)
@@ -714,12 +718,7 @@ def stop_between_pieces(
     pool = _unscored(labels, scores, params) & ~np.isin(labels, selected)
     if exclude is not None:
         pool &= ~exclude
-    pieces = []
-    for c in selected:
-        member = labels == c
-        if member.any():
-            pieces.append(_piece_ends(c, t[member], xyz[member]))
-    pieces.sort(key=lambda e: e.first)
+    pieces = sorted(_selected_ends(labels, xyz, t, selected), key=lambda e: e.first)
     extent = float(params.stream_hover_max_extent)
     fp = float(params.frame_period)
     out = labels.copy()
