@@ -422,6 +422,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=600.0,
     ),
     ParamSpec(
+        "report_below_floor",
+        "bool",
+        True,
+        "report_lag: the late output's growth at a track's ends (report_extend_head, "
+        "report_extend_tail) also takes the Mid360's returns at or below mid360_min_z "
+        "within one growth step of the track's first or newest sample, in voxels hit in "
+        "fewer than static_min_bins time bins of the local history, across gaps of at "
+        "most max_extrapolation, as offline's extend_below_floor does: a drone lifting "
+        "off or touching down on the ground (deviation 135); false = the streaming "
+        "detector drops those returns as frames arrive.",
+    ),
+    ParamSpec(
         "bridge_split_pieces",
         "bool",
         True,

@@ -59,14 +59,14 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.background import BackgroundGrid
+from clusterfilter_ros.core.background import BackgroundGrid, persistent_mask
 from clusterfilter_ros.core.clustering import absorb_colocated_noise
 from clusterfilter_ros.core.estimate import Estimate, reported_positions
-from clusterfilter_ros.core.frame import Frame
-from clusterfilter_ros.core.linking import extend_track, fill_track
+from clusterfilter_ros.core.frame import MID360, Frame
+from clusterfilter_ros.core.linking import extend_track, fill_track, linking_reach
 from clusterfilter_ros.core.offline import global_clusters
 from clusterfilter_ros.core.params import ParamSet, detector_params
-from clusterfilter_ros.core.preprocess import frame_points
+from clusterfilter_ros.core.preprocess import frame_points, points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import (
     ClusterScores,
     score_clusters,
@@ -365,6 +365,8 @@ class _HistorySnapshot:
     # Stamp since which every lidar seen so far has sent frames without a pause
     # (stream_static_drift: the map watched the scene only then).
     watched_since: float = -math.inf
+    # report_below_floor: the Mid360's returns at or below mid360_min_z (xyz, t).
+    floor: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -448,6 +450,9 @@ class StreamingDetector:
         # report_denoised: the far points the denoise dropped, per frame, as the history.
         self._dropped: deque[_Chunk] = deque()
         self._dropped_points = 0
+        # report_below_floor: the Mid360's returns at or below mid360_min_z, per frame.
+        self._floor: deque[_Chunk] = deque()
+        self._floor_points = 0
         self._denoise_recent: dict[str, voxel.SlidingVoxelCounts] = {}
         self._track: deque[_TrackSample] = deque()
         # The track's grown head and tail and its filled gaps (the late output's only).
@@ -543,7 +548,15 @@ class StreamingDetector:
         if math.isnan(self._origin):
             self._origin = stamp
         self._watch(frame.sensor, stamp)
-        xyz, t = frame_points(frame, self.params)
+        if frame.sensor == MID360 and self._keeps_floor():
+            usable, below = usable_and_below_floor(frame, self.params)
+            xyz, t = points_at(frame, usable)
+            if below.any():
+                fxyz, ft = points_at(frame, below)
+                self._floor.append(_Chunk(stamp, fxyz, ft, np.empty(0, np.int64)))
+                self._floor_points += ft.size
+        else:
+            xyz, t = frame_points(frame, self.params)
         self._now = max(self._now, stamp)
         dropped = None  # the denoise's dropped returns far enough out to be kept
         if frame.sensor in self.params.denoise_sensors:
@@ -700,6 +713,16 @@ class StreamingDetector:
             and (p.report_extend_head or p.report_extend_tail or p.report_fill)
         )
 
+    def _keeps_floor(self) -> bool:
+        """Whether the Mid360's returns at or below ``mid360_min_z`` are kept
+        (report_below_floor: the late output's growth at a track's ends may take them)."""
+        p = self.params
+        return (
+            p.report_lag > 0
+            and p.report_below_floor
+            and (p.report_extend_head or p.report_extend_tail)
+        )
+
     def _far_dropped(
         self, xyz: np.ndarray, t: np.ndarray, gone: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -726,6 +749,8 @@ class StreamingDetector:
             self._chunk_points -= self._chunks.popleft().xyz.shape[0]
         while self._dropped and (self._dropped[0].stamp < lo or self._dropped_points > cap):
             self._dropped_points -= self._dropped.popleft().xyz.shape[0]
+        while self._floor and (self._floor[0].stamp < lo or self._floor_points > cap):
+            self._floor_points -= self._floor.popleft().xyz.shape[0]
         while self._track and self._track[0].t < lo:
             self._track.popleft()
 
@@ -760,6 +785,12 @@ class StreamingDetector:
                 np.concatenate([c.t for c in self._dropped]),
                 np.concatenate([c.static_keys for c in self._dropped]),
             )
+        floor = None
+        if xyz is not None and self._floor_points:
+            floor = (
+                np.concatenate([c.xyz for c in self._floor]),
+                np.concatenate([c.t for c in self._floor]),
+            )
         snapshot = _HistorySnapshot(
             now=self._now,
             origin=self._origin,
@@ -780,6 +811,7 @@ class StreamingDetector:
             if expected is None or not self._track
             else _sample_arrays(self._track)[:2],
             watched_since=self._watched_since,
+            floor=floor,
         )
         self._job_ms = (time.perf_counter() - start) * 1e3
         if self.background:
@@ -1678,7 +1710,21 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 gt = np.concatenate([t, dropped[1]])
                 gmask = np.concatenate([mask, np.zeros(dropped[1].size, bool)])
                 gpool = np.concatenate([pool, np.ones(dropped[1].size, bool)])
-            head, tail = _grown_ends(gmask, gpool, gxyz, gt, samples, p)
+            short = None
+            if snap.floor is not None:
+                # report_below_floor: growth-only, and only across max_extrapolation.
+                fxyz, ft = _floor_near(snap.floor, samples, p)
+                if ft.size:
+                    short = np.concatenate([np.zeros(gt.size, bool), np.ones(ft.size, bool)])
+                    gxyz = np.concatenate([gxyz, fxyz])
+                    gt = np.concatenate([gt, ft])
+                    gmask = np.concatenate([gmask, np.zeros(ft.size, bool)])
+                    gpool = np.concatenate([gpool, np.ones(ft.size, bool)])
+            head, tail = _grown_ends(gmask, gpool, gxyz, gt, samples, p, short)
+            if short is not None:
+                # The fill reads the returns above the floor only.
+                n = short.size - int(short.sum())
+                gmask, gpool, gxyz, gt = gmask[:n], gpool[:n], gxyz[:n], gt[:n]
             tail = _short_of_structure(tail, structure, p)
             if p.report_fill:
                 fpool = gpool
@@ -1939,6 +1985,33 @@ def _after_run(run: tuple[float, float, bool]) -> float:
     return math.nextafter(run[1], math.inf)
 
 
+def _floor_near(
+    floor: tuple[np.ndarray, np.ndarray], samples: list[_TrackSample], params: ParamSet
+) -> tuple[np.ndarray, np.ndarray]:
+    """report_below_floor: the returns of ``floor`` (the Mid360's at or below
+    ``mid360_min_z``) within one growth step (the linking reach for ``extend_max_gap``)
+    of the track's first or newest sample, without those in voxels hit in
+    ``static_min_bins`` or more time bins (:func:`~.background.persistent_mask`): the
+    ground, walls and parked things stay out, a drone lifting off or touching down
+    does not, as offline's ``extend_below_floor``."""
+    fxyz, ft = floor
+    radius = float(linking_reach(params.extend_max_gap, params))
+    near = np.zeros(ft.size, dtype=bool)
+    fz = fxyz[:, 2]
+    for end in (samples[0].position, samples[-1].position):
+        # Most track ends are far above the floor: a height test first (cheap), the
+        # distance only for the returns that pass it.
+        rows = np.flatnonzero(np.abs(fz - end[2]) <= radius)
+        if rows.size:
+            d = fxyz[rows].astype(np.float64) - end
+            near[rows[np.einsum("ij,ij->i", d, d) <= radius * radius]] = True
+    fxyz, ft = fxyz[near], ft[near]
+    if ft.size:
+        transient = ~persistent_mask(fxyz, ft, params)
+        fxyz, ft = fxyz[transient], ft[transient]
+    return fxyz, ft
+
+
 def _grown_ends(
     mask: np.ndarray,
     pool: np.ndarray,
@@ -1946,6 +2019,7 @@ def _grown_ends(
     t: np.ndarray,
     samples: list[_TrackSample],
     params: ParamSet,
+    short_gap: np.ndarray | None = None,
 ) -> tuple[tuple[_TrackSample, ...], tuple[_TrackSample, ...]]:
     """(head, tail): the samples the track of ``samples``, rebuilt from the cluster of
     ``mask``, grows into before its first sample (report_extend_head) and after its
@@ -1954,16 +2028,18 @@ def _grown_ends(
     rebuilt track left out (deviations 39, 60 and 115), and grown from there the tail
     followed a bird that crossed the drone's path (deviation 117). Those returns may
     still be taken, as the pool's are, where the track was heading (the drone's own,
-    left out behind a sample another object's returns had moved)."""
+    left out behind a sample another object's returns had moved). ``short_gap``: pool
+    points that join only within ``max_extrapolation`` of the end (the returns below the
+    floor)."""
     half = params.frame_period / 2
     head: tuple[_TrackSample, ...] = ()
     tail: tuple[_TrackSample, ...] = ()
     if params.report_extend_head:
         own = mask & (t >= samples[0].t - half)
-        head = _grown(own, pool | (mask & ~own), xyz, t, samples[0].t, params, forward=False)
+        head = _grown(own, pool | (mask & ~own), xyz, t, samples[0].t, params, False, short_gap)
     if params.report_extend_tail:
         own = mask & (t <= samples[-1].t + half)
-        tail = _grown(own, pool | (mask & ~own), xyz, t, samples[-1].t, params, forward=True)
+        tail = _grown(own, pool | (mask & ~own), xyz, t, samples[-1].t, params, True, short_gap)
     return head, tail
 
 
@@ -1975,6 +2051,7 @@ def _grown(
     edge: float,
     params: ParamSet,
     forward: bool,
+    short_gap: np.ndarray | None = None,
 ) -> tuple[_TrackSample, ...]:
     """report_extend_tail (``forward``) / report_extend_head: the samples beyond ``edge``
     (the track's newest sample, after it; else its first, before it) of the points in
@@ -2014,6 +2091,7 @@ def _grown(
             extend_brake_hover=params.extend_brake_hover and params.report_extend_brake,
             **({} if far else {"extend_far_gap": 0.0}),
         ),
+        short_gap=None if short_gap is None else short_gap[sub],
         grow_end=forward,
         grow_start=not forward,
     )

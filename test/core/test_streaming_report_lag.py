@@ -1480,3 +1480,66 @@ def test_the_late_growth_finds_a_hover_after_a_braking_end_with_report_extend_br
     samples = grown(True)
     assert len(samples) == 10
     assert all(abs(s.position[0] - 29.67) < 0.3 for s in samples)
+
+
+def _take_off(duration: float = 12.0, seed: int = 3) -> list[Frame]:
+    """Mid360 and Avia frames at 10 Hz: ground returns 1.3 m below the Mid360 (at or
+    below ``mid360_min_z``, every frame; none in the drone's 1.5 m static voxels), and
+    a drone seen from 3.6 s, on the ground 6 m out until 4 s, that then climbs at 2 m/s,
+    crossing the Mid360's height at 4.5 s; three returns a Mid360 frame."""
+    rng = np.random.default_rng(seed)
+    grid = np.stack(np.meshgrid(np.arange(-10.0, 4.4, 0.7), np.arange(-10.0, 10.0, 0.7)), -1)
+    ground = np.column_stack([grid.reshape(-1, 2), np.full(grid.size // 2, -1.3)])
+    frames = []
+    for i in range(int(duration * 10)):
+        stamp = 1000.0 + i * 0.1
+        z = -1.0 + 2.0 * max(stamp - 1004.0, 0.0)
+        drone = np.array([6.0, -3.0, z]) + rng.normal(0, 0.08, (3, 3))
+        mid = ground + rng.normal(0, 0.02, ground.shape)
+        if stamp >= 1003.55:
+            mid = np.vstack([mid, drone])
+        frames.append(Frame(stamp, MID360, mid.astype(np.float32)))
+        sky = rng.normal(size=(20, 3))
+        sky[:, 2] = np.abs(sky[:, 2]) + 1.0
+        sky *= rng.uniform(20, 400, (20, 1)) / np.linalg.norm(sky, axis=1, keepdims=True)
+        frames.append(Frame(stamp + 0.004, AVIA, sky.astype(np.float32)))
+    return frames
+
+
+def test_the_late_output_grows_into_a_lift_off_below_the_mid360s_floor():
+    frames = _take_off()
+    first, live_runs = {}, {}
+    for below in (False, True):
+        det = StreamingDetector(detector_params({"report_lag": LAG, "report_below_floor": below}))
+        live, delayed, _ = _push_all(frames, det)
+        late = delayed + det.flush()
+        assert live and late
+        first[below] = min(e.stamp for e in late)
+        live_runs[below] = [(e.stamp, e.position.tolist()) for e in live]
+    # The live estimates are the same either way.
+    assert live_runs[True] == live_runs[False]
+    # Without the floor's returns the late output starts max_extrapolation (0.5 s)
+    # before the drone crossed the Mid360's height; with them, from its first returns
+    # on the ground, as offline's extend_below_floor does.
+    assert first[False] >= 1003.95
+    assert first[True] <= 1003.65
+
+
+def test_floor_near_keeps_transient_returns_near_the_track_ends():
+    params = detector_params()
+    samples = [
+        streaming._TrackSample(5.0, np.array([6.0, -3.0, 0.5]), np.zeros((1, 3), np.float32)),
+        streaming._TrackSample(9.0, np.array([6.0, -3.0, 8.5]), np.zeros((1, 3), np.float32)),
+    ]
+    # Ground every 0.1 s in the voxels beside the lift-off's (static_voxel 1.5 m).
+    t_ground = np.repeat(np.arange(0.0, 9.0, 0.1), 2)
+    ground = np.column_stack(
+        [np.tile([4.0, 8.0], t_ground.size // 2), np.full(t_ground.size, -3.0), -1.3 + 0 * t_ground]
+    )
+    lift = np.array([[6.0, -3.0, -0.4], [6.0, -3.0, -0.2]])
+    far = np.array([[30.0, -3.0, -0.3]])
+    xyz = np.vstack([ground, lift, far]).astype(np.float32)
+    t = np.concatenate([t_ground, [4.7, 4.8], [4.8]])
+    fxyz, ft = streaming._floor_near((xyz, t), samples, params)
+    np.testing.assert_array_equal(ft, [4.7, 4.8])
+    np.testing.assert_allclose(fxyz, lift, atol=1e-6)
