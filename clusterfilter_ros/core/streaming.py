@@ -637,6 +637,7 @@ class StreamingDetector:
         grid_bytes = self._background.nbytes
         local_bytes = sum(c.xyz.nbytes + c.t.nbytes + c.static_keys.nbytes for c in self._chunks)
         local_bytes += sum(c.xyz.nbytes + c.t.nbytes + c.static_keys.nbytes for c in self._dropped)
+        local_bytes += sum(c.xyz.nbytes + c.t.nbytes for c in self._floor)
         local_bytes += self._static.nbytes
         pending_bytes = sum(k.nbytes + t.nbytes for k, t in self._pending)
         return {

@@ -1518,6 +1518,15 @@ def test_the_late_output_grows_into_a_lift_off_below_the_mid360s_floor():
         live_runs[below] = [(e.stamp, e.position.tolist()) for e in live]
     # The live estimates are the same either way.
     assert live_runs[True] == live_runs[False]
+    # The kept returns count in the state's size, and stay bounded by the history.
+    det = StreamingDetector(detector_params({"report_lag": LAG}))
+    off = StreamingDetector(detector_params({"report_lag": LAG, "report_below_floor": False}))
+    for f in frames:
+        det.push(f)
+        off.push(f)
+    extra = det.stats()["local_bytes"] - off.stats()["local_bytes"]
+    ground = sum(int((f.xyz[:, 2] <= 0.0).sum()) for f in frames if f.sensor == MID360) / 120
+    assert 0 < extra <= 1.01 * ground * 10 * 10 * 20  # 10 s of 10 Hz frames, 20 B a return
     # Without the floor's returns the late output starts max_extrapolation (0.5 s)
     # before the drone crossed the Mid360's height; with them, from its first returns
     # on the ground, as offline's extend_below_floor does.
