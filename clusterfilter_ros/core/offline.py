@@ -568,7 +568,7 @@ def bridging_pieces(
         & (scores.centroid[:, 2] >= params.min_centroid_z)
         & (scores.local_extent <= params.max_local_extent)
     )
-    pool[[c for c in selected if c < pool.size]] = False
+    pool[selected] = False
     split_only = np.ones(pool.size, dtype=bool)
     inside = labels >= 0
     split_only[np.unique(labels[inside & ~was_split])] = False
@@ -838,25 +838,39 @@ def growth_only_points(
         parts_t.append(dt)
         parts_floor.append(np.zeros(dt.size, dtype=bool))
     if _grows_below_floor(params) and cloud.floor_t.size and selected:
-        radius = float(linking_reach(params.extend_max_gap, params))
-        fz = np.ascontiguousarray(cloud.floor_xyz[:, 2])
-        near = np.zeros(fz.size, dtype=bool)
-        for end in _track_ends(labels, xyz, t, selected):
-            # Most track ends are far above the floor: a height test first (cheap), the
-            # distance only for the points that pass it.
-            rows = np.flatnonzero(np.abs(fz - end[2]) <= radius)
-            d = cloud.floor_xyz[rows] - end
-            near[rows[np.einsum("ij,ij->i", d, d) <= radius * radius]] = True
-        fxyz, ft = cloud.floor_xyz[near], cloud.floor_t[near]
-        transient = ~persistent_mask(fxyz, ft, params)
-        parts_xyz.append(fxyz[transient])
-        parts_t.append(ft[transient])
-        parts_floor.append(np.ones(int(transient.sum()), dtype=bool))
+        ends = _track_ends(labels, xyz, t, selected)
+        fxyz, ft = transient_below_floor(cloud.floor_xyz, cloud.floor_t, ends, params)
+        parts_xyz.append(fxyz)
+        parts_t.append(ft)
+        parts_floor.append(np.ones(ft.size, dtype=bool))
     return (
         _stack(parts_xyz, np.empty((0, 3), np.float32)),
         _stack(parts_t, np.empty(0)),
         _stack(parts_floor, np.empty(0, dtype=bool)),
     )
+
+
+def transient_below_floor(
+    floor_xyz: np.ndarray, floor_t: np.ndarray, ends: np.ndarray, params: ParamSet
+) -> tuple[np.ndarray, np.ndarray]:
+    """(xyz, t) of the Mid360 returns at or below ``mid360_min_z`` (``floor_xyz``,
+    ``floor_t``) within one growth step (the linking reach for ``extend_max_gap``) of
+    any of the track ``ends`` (K, 3), except those in voxels hit in ``static_min_bins``
+    or more time bins of these returns (:func:`~.background.persistent_mask`): the
+    ground, walls and parked things stay out, a drone taking off or landing does not.
+    Offline's ``extend_below_floor`` and the late output's ``report_below_floor``."""
+    radius = float(linking_reach(params.extend_max_gap, params))
+    fz = np.ascontiguousarray(floor_xyz[:, 2])
+    near = np.zeros(fz.size, dtype=bool)
+    for end in ends:
+        # Most track ends are far above the floor: a height test first (cheap), the
+        # distance only for the points that pass it.
+        rows = np.flatnonzero(np.abs(fz - end[2]) <= radius)
+        d = floor_xyz[rows] - end
+        near[rows[np.einsum("ij,ij->i", d, d) <= radius * radius]] = True
+    fxyz, ft = floor_xyz[near], floor_t[near]
+    transient = ~persistent_mask(fxyz, ft, params)
+    return fxyz[transient], ft[transient]
 
 
 def _track_ends(

@@ -59,12 +59,12 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from clusterfilter_ros.core import voxel
-from clusterfilter_ros.core.background import BackgroundGrid, persistent_mask
+from clusterfilter_ros.core.background import BackgroundGrid
 from clusterfilter_ros.core.clustering import absorb_colocated_noise
 from clusterfilter_ros.core.estimate import Estimate, reported_positions
 from clusterfilter_ros.core.frame import MID360, Frame
-from clusterfilter_ros.core.linking import extend_track, fill_track, linking_reach
-from clusterfilter_ros.core.offline import global_clusters
+from clusterfilter_ros.core.linking import extend_track, fill_track
+from clusterfilter_ros.core.offline import global_clusters, transient_below_floor
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points, points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import (
@@ -1704,28 +1704,21 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         tail: tuple[_TrackSample, ...] = ()
         inner: tuple[_TrackSample, ...] = ()
         if samples and pool is not None:
-            gmask, gpool, gxyz, gt = mask, pool, xyz, t
+            grow = (mask, pool, xyz, t)
             if dropped is not None and dropped[1].size:
                 # report_denoised: the denoise's dropped points are growth-only.
-                gxyz = np.concatenate([xyz, dropped[0]])
-                gt = np.concatenate([t, dropped[1]])
-                gmask = np.concatenate([mask, np.zeros(dropped[1].size, bool)])
-                gpool = np.concatenate([pool, np.ones(dropped[1].size, bool)])
+                grow = _with_growth_only(grow, dropped[0], dropped[1])
+            fill = grow  # the fill reads the returns above the floor only
             short = None
             if snap.floor is not None:
                 # report_below_floor: growth-only, and only across max_extrapolation.
-                fxyz, ft = _floor_near(snap.floor, samples, p)
+                ends = np.array([samples[0].position, samples[-1].position])
+                fxyz, ft = transient_below_floor(*snap.floor, ends, p)
                 if ft.size:
-                    short = np.concatenate([np.zeros(gt.size, bool), np.ones(ft.size, bool)])
-                    gxyz = np.concatenate([gxyz, fxyz])
-                    gt = np.concatenate([gt, ft])
-                    gmask = np.concatenate([gmask, np.zeros(ft.size, bool)])
-                    gpool = np.concatenate([gpool, np.ones(ft.size, bool)])
-            head, tail = _grown_ends(gmask, gpool, gxyz, gt, samples, p, short)
-            if short is not None:
-                # The fill reads the returns above the floor only.
-                n = short.size - int(short.sum())
-                gmask, gpool, gxyz, gt = gmask[:n], gpool[:n], gxyz[:n], gt[:n]
+                    short = np.arange(grow[3].size + ft.size) >= grow[3].size
+                    grow = _with_growth_only(grow, fxyz, ft)
+            head, tail = _grown_ends(*grow, samples, p, short)
+            gmask, gpool, gxyz, gt = fill
             tail = _short_of_structure(tail, structure, p)
             if p.report_fill:
                 fpool = gpool
@@ -1986,31 +1979,20 @@ def _after_run(run: tuple[float, float, bool]) -> float:
     return math.nextafter(run[1], math.inf)
 
 
-def _floor_near(
-    floor: tuple[np.ndarray, np.ndarray], samples: list[_TrackSample], params: ParamSet
-) -> tuple[np.ndarray, np.ndarray]:
-    """report_below_floor: the returns of ``floor`` (the Mid360's at or below
-    ``mid360_min_z``) within one growth step (the linking reach for ``extend_max_gap``)
-    of the track's first or newest sample, without those in voxels hit in
-    ``static_min_bins`` or more time bins (:func:`~.background.persistent_mask`): the
-    ground, walls and parked things stay out, a drone lifting off or touching down
-    does not, as offline's ``extend_below_floor``."""
-    fxyz, ft = floor
-    radius = float(linking_reach(params.extend_max_gap, params))
-    near = np.zeros(ft.size, dtype=bool)
-    fz = fxyz[:, 2]
-    for end in (samples[0].position, samples[-1].position):
-        # Most track ends are far above the floor: a height test first (cheap), the
-        # distance only for the returns that pass it.
-        rows = np.flatnonzero(np.abs(fz - end[2]) <= radius)
-        if rows.size:
-            d = fxyz[rows].astype(np.float64) - end
-            near[rows[np.einsum("ij,ij->i", d, d) <= radius * radius]] = True
-    fxyz, ft = fxyz[near], ft[near]
-    if ft.size:
-        transient = ~persistent_mask(fxyz, ft, params)
-        fxyz, ft = fxyz[transient], ft[transient]
-    return fxyz, ft
+def _with_growth_only(
+    arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    xyz: np.ndarray,
+    t: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(mask, pool, xyz, t) with the returns ``xyz``, ``t`` appended as growth-only
+    points: in the pool, not of the track."""
+    mask, pool, pxyz, pt = arrays
+    return (
+        np.concatenate([mask, np.zeros(t.size, bool)]),
+        np.concatenate([pool, np.ones(t.size, bool)]),
+        np.concatenate([pxyz, xyz]),
+        np.concatenate([pt, t]),
+    )
 
 
 def _grown_ends(

@@ -1534,12 +1534,13 @@ def test_the_late_output_grows_into_a_lift_off_below_the_mid360s_floor():
     assert first[True] <= 1003.65
 
 
-def test_floor_near_keeps_transient_returns_near_the_track_ends():
+def test_transient_below_floor_keeps_the_returns_near_the_track_ends():
+    # The selection the late output shares with offline's extend_below_floor; the ends
+    # are the track's first and newest sample positions.
+    from clusterfilter_ros.core.offline import transient_below_floor
+
     params = detector_params()
-    samples = [
-        streaming._TrackSample(5.0, np.array([6.0, -3.0, 0.5]), np.zeros((1, 3), np.float32)),
-        streaming._TrackSample(9.0, np.array([6.0, -3.0, 8.5]), np.zeros((1, 3), np.float32)),
-    ]
+    ends = np.array([[6.0, -3.0, 0.5], [6.0, -3.0, 8.5]])
     # Ground every 0.1 s in the voxels beside the lift-off's (static_voxel 1.5 m).
     t_ground = np.repeat(np.arange(0.0, 9.0, 0.1), 2)
     ground = np.column_stack(
@@ -1549,6 +1550,6 @@ def test_floor_near_keeps_transient_returns_near_the_track_ends():
     far = np.array([[30.0, -3.0, -0.3]])
     xyz = np.vstack([ground, lift, far]).astype(np.float32)
     t = np.concatenate([t_ground, [4.7, 4.8], [4.8]])
-    fxyz, ft = streaming._floor_near((xyz, t), samples, params)
+    fxyz, ft = transient_below_floor(xyz, t, ends, params)
     np.testing.assert_array_equal(ft, [4.7, 4.8])
     np.testing.assert_allclose(fxyz, lift, atol=1e-6)
