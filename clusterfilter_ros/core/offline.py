@@ -199,6 +199,8 @@ def cluster_trajectory(
         stray_accel=float(params.link_max_accel),
         stray_window=float(params.link_fit_window),
         stray_span=2.0 * float(params.frame_period),
+        stray_chord_span=float(params.link_max_gap) if params.stray_chord else 0.0,
+        stray_chord_lone=2.0 * float(params.frame_period),
     )
 
 

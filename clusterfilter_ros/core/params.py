@@ -447,6 +447,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "bird's returns (deviation 134); false = not bridged.",
     ),
     ParamSpec(
+        "stray_chord",
+        "bool",
+        True,
+        "Offline trajectory: a track sample farther than stray_distance plus "
+        "link_max_accel x dt1 x dt2 / 2 from the chord between its neighbours (at most "
+        "link_max_gap apart) is left out of the fit, as the delayed output leaves it out: "
+        "a noise return the clustering joined to a drone's track 0.6 s after one of its "
+        "returns and 1.0 s before the next, 5.6 m off its path, which the smoothing "
+        "spline passed through (deviation 136); false = only returns far from the "
+        "fitted track are left out.",
+    ),
+    ParamSpec(
         "lead_in_reach",
         "float",
         10.0,

@@ -74,7 +74,7 @@ from clusterfilter_ros.core.scoring import (
     structure_contact,
 )
 from clusterfilter_ros.core.splitting import kinematic_tracks, split_and_score
-from clusterfilter_ros.core.trajectory import weighted_line, weighted_quadratic
+from clusterfilter_ros.core.trajectory import chord_strays, weighted_line, weighted_quadratic
 
 #: Frames waiting for their report_lag estimate beyond this are estimated at once (a
 #: stream whose stamps stop advancing cannot grow the queue without bound).
@@ -2449,29 +2449,10 @@ def _competing_track(
 
 
 def _stray_samples(ts: np.ndarray, ps: np.ndarray, params: ParamSet) -> np.ndarray:
-    """(S,) bool: the samples (times ``ts`` ascending, positions ``ps``) that lie farther
-    than ``stray_distance`` plus ``link_max_accel`` x dt1 x dt2 / 2 (the most a drone
-    accelerating that hard strays from the chord) from the straight line between the
-    samples on either side of them, those at most ``link_max_gap`` apart: a lone return
-    of something else the track took between two of the drone's (deviation 83); of
-    neighbouring samples only the one that strays most. A track's first and last
-    samples are never strays here."""
-    out = np.zeros(ts.size, dtype=bool)
-    if ts.size < 3 or params.stray_distance <= 0:
-        return out
-    t0, t1, t2 = ts[:-2], ts[1:-1], ts[2:]
-    span = t2 - t0
-    ok = (span > 0) & (span <= params.link_max_gap)
-    frac = np.where(span > 0, (t1 - t0) / np.where(span > 0, span, 1.0), 0.5)
-    between = ps[:-2] + frac[:, None] * (ps[2:] - ps[:-2])
-    off = np.linalg.norm(ps[1:-1] - between, axis=1)
-    allow = params.stray_distance + 0.5 * params.link_max_accel * (t1 - t0) * (t2 - t1)
-    # A stray moves the chords its neighbours are judged by, too: only the sample that
-    # strays most among its neighbours is taken for one.
-    excess = np.zeros(ts.size)
-    excess[1:-1] = np.where(ok, off / allow, 0.0)
-    out[1:-1] = (excess[1:-1] > 1.0) & (excess[1:-1] >= excess[:-2]) & (excess[1:-1] >= excess[2:])
-    return out
+    """(S,) bool: the samples (times ``ts`` ascending, positions ``ps``) that
+    :func:`~.trajectory.chord_strays` leaves out, with ``stray_distance``,
+    ``link_max_accel`` and ``link_max_gap`` (deviation 83)."""
+    return chord_strays(ts, ps, params.stray_distance, params.link_max_accel, params.link_max_gap)
 
 
 def _without_strays(piece: _TrackPiece, params: ParamSet) -> _TrackPiece:

@@ -85,6 +85,42 @@ def weighted_quadratic(dt: np.ndarray, xyz: np.ndarray, w: np.ndarray) -> np.nda
     return np.linalg.lstsq(design, xyz * sw, rcond=None)[0]
 
 
+def chord_strays(
+    ts: np.ndarray,
+    ps: np.ndarray,
+    distance: float,
+    accel: float,
+    max_span: float,
+    lone_gap: float = 0.0,
+) -> np.ndarray:
+    """(S,) bool: the samples (times ``ts`` ascending, positions ``ps`` (S, 3)) that lie
+    farther than ``distance`` plus ``accel`` x dt1 x dt2 / 2 (the most an object
+    accelerating that hard strays from the chord) from the straight line between the
+    samples on either side of them, those at most ``max_span`` seconds apart: a lone
+    return of something else a track took between two of the drone's; of neighbouring
+    samples only the one that strays most. The first and last samples are never strays
+    here; ``distance`` <= 0 finds none. ``lone_gap`` (s): only samples at least this far
+    in time from both neighbours are judged."""
+    out = np.zeros(ts.size, dtype=bool)
+    if ts.size < 3 or distance <= 0:
+        return out
+    t0, t1, t2 = ts[:-2], ts[1:-1], ts[2:]
+    span = t2 - t0
+    ok = (span > 0) & (span <= max_span)
+    frac = np.where(span > 0, (t1 - t0) / np.where(span > 0, span, 1.0), 0.5)
+    between = ps[:-2] + frac[:, None] * (ps[2:] - ps[:-2])
+    off = np.linalg.norm(ps[1:-1] - between, axis=1)
+    allow = distance + 0.5 * accel * (t1 - t0) * (t2 - t1)
+    # A stray moves the chords its neighbours are judged by, too: only the sample that
+    # strays most among its neighbours is taken for one.
+    excess = np.zeros(ts.size)
+    excess[1:-1] = np.where(ok, off / allow, 0.0)
+    out[1:-1] = (excess[1:-1] > 1.0) & (excess[1:-1] >= excess[:-2]) & (excess[1:-1] >= excess[2:])
+    if lone_gap > 0:
+        out[1:-1] &= (t1 - t0 >= lone_gap) & (t2 - t1 >= lone_gap)
+    return out
+
+
 @dataclass
 class _Segment:
     t_start: float
@@ -205,6 +241,8 @@ def fit_trajectory(
     stray_accel: float = math.inf,
     stray_window: float = 1.0,
     stray_span: float = 0.0,
+    stray_chord_span: float = 0.0,
+    stray_chord_lone: float = 0.0,
 ) -> Trajectory | None:
     """Fit a :class:`Trajectory` to drone points (t (N,), xyz (N, 3)); None if no points.
 
@@ -232,6 +270,13 @@ def fit_trajectory(
     ``stray_span`` (s, 0 = off): samples spanning less than this give no heading (two
     returns 0.06 s apart give their scatter): the nearest further in join them until
     they span it.
+    ``stray_chord_span`` (s, 0 = off, with ``stray_distance``): samples that
+    :func:`chord_strays` finds between neighbours at most this far apart (with
+    ``stray_accel``), at least ``stray_chord_lone`` seconds from both, are left out of a
+    last fit, after the refits: a spline passes through a lone stray between two of the
+    track's samples, so the distance to the fit never finds it. (Where another object's
+    samples alternate with the drone's, the chords run between the other object's and
+    throw out the drone's: only lone samples are judged.)
     """
     t = np.asarray(t, dtype=np.float64).reshape(-1)
     xyz = np.asarray(xyz, dtype=np.float64).reshape(-1, 3)
@@ -243,10 +288,13 @@ def fit_trajectory(
     reach = None
     if stray_distance > 0 and stray_speed > 0:
         reach = (stray_distance, stray_speed, stray_accel, stray_window, stray_span)
+    chord = None
+    if stray_chord_span > 0:
+        chord = (stray_distance, stray_accel, stray_chord_span, stray_chord_lone)
     fit_args = (max_gap, max_extrapolation, bin_seconds, context_gap, context_window, reach)
     traj = _fit(t, xyz, conf_pts, *fit_args)
+    kept = np.ones(t.size, dtype=bool)
     if stray_distance > 0:
-        kept = np.ones(t.size, dtype=bool)
         for _ in range(STRAY_REFITS):
             off = np.linalg.norm(traj(t) - xyz, axis=1)
             keep = ~(off > stray_distance)  # NaN (no estimate there): kept
@@ -254,6 +302,13 @@ def fit_trajectory(
                 break
             kept = keep
             traj = _fit(t[kept], xyz[kept], conf_pts[kept], *fit_args)
+    if chord is not None:
+        # Last, once the returns far from the fit are out: where another object's
+        # returns alternate with the drone's, the chords would run between the
+        # other object's samples and throw out the drone's.
+        ts, ps, _ = _bin_means(t[kept], xyz[kept], bin_seconds)
+        if chord_strays(ts, ps, *chord).any():
+            traj = _fit(t[kept], xyz[kept], conf_pts[kept], *fit_args, chord)
     # Strays are judged against the context lines as fitted (a lone return off its
     # neighbours' line is left out); what is kept is then estimated through its own
     # position: on a curving pass the line through the neighbours' denser windows misses
@@ -272,6 +327,7 @@ def _fit(
     context_gap: float,
     context_window: float,
     reach: tuple[float, float, float, float, float] | None,
+    chord: tuple[float, float, float, float] | None = None,
 ) -> Trajectory:
     """:func:`fit_trajectory` without the stray refits, on finite points."""
     order = np.argsort(t, kind="stable")
@@ -281,6 +337,9 @@ def _fit(
         t.astype(np.float64), np.column_stack([xyz, conf_pts]).astype(np.float64), bin_seconds
     )
     ps, cs = means[:, :3], means[:, 3]
+    if chord is not None:
+        keep = ~chord_strays(ts, ps, *chord)
+        ts, ps, cs, ws = ts[keep], ps[keep], cs[keep], ws[keep]
     breaks = np.nonzero(np.diff(ts) > max_gap)[0] + 1
     groups = np.split(np.arange(ts.size), breaks)
     if reach is not None:

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from clusterfilter_ros.core.trajectory import (
+    chord_strays,
     fit_trajectory,
     merge_trajectories,
     time_samples,
@@ -182,6 +185,60 @@ def test_stray_refit_leaves_a_clean_track_alone_and_keeps_a_mixed_cloud():
     c = fit_trajectory(t, two, **args)(stamps)
     d = fit_trajectory(t, two, **args, stray_distance=2.0)(stamps)
     np.testing.assert_array_equal(c, d)
+
+
+def test_a_lone_stray_between_two_returns_is_left_out_by_the_chord():
+    # take-off 6303 (62nd set), 5-12 s of the offline track: a drone speeding up from
+    # 5 to 7 m/s along y, unseen from 7.61 s to 9.20 s but for one noise return the
+    # clustering joined to it at 8.22 s, 5.6 m off its path.
+    data = np.load(Path(__file__).parent / "data" / "takeoff_6303_lone_stray.npz")
+    t, xyz, gt_t, gt_xyz = data["t"], data["xyz"], data["gt_t"], data["gt_xyz"]
+    args = dict(
+        max_gap=1.0,
+        max_extrapolation=0.3,
+        bin_seconds=0.05,
+        stray_distance=2.0,
+        stray_speed=15.0,
+        stray_accel=4.0,
+        stray_window=1.0,
+        stray_span=0.2,
+    )
+    distance_only = fit_trajectory(t, xyz, **args)
+    chord = fit_trajectory(t, xyz, **args, stray_chord_span=2.0, stray_chord_lone=0.2)
+    # The smoothing spline passes through the stray, so its distance to the fit never
+    # finds it, and the estimates across the gap swing up to 6 m off the drone.
+    err = np.linalg.norm(distance_only(gt_t) - gt_xyz, axis=1)
+    assert np.nanmax(err) > 5.0
+    assert len(distance_only.segments) == 1
+    # Left out, the 1.6 s gap is longer than max_gap: no estimate inside it, and the
+    # estimates on both sides stay on the drone.
+    assert [round(s.t_end, 2) for s in chord.segments] == [7.61, 11.72]
+    got = chord(gt_t)
+    inside = (gt_t > 7.61 + 0.3) & (gt_t < 9.20 - 0.3)
+    assert inside.any() and np.isnan(got[inside]).all()
+    err = np.linalg.norm(got[~inside] - gt_xyz[~inside], axis=1)
+    assert np.all(np.isfinite(err)) and err.max() < 1.0
+
+
+def test_chord_strays_needs_both_neighbours_within_the_span():
+    ts = np.array([0.0, 0.6, 1.6, 2.0])
+    ps = np.array([[0.0, 0.0, 0.0], [0.0, 6.0, 0.0], [0.0, 1.6, 0.0], [0.0, 2.0, 0.0]])
+    assert chord_strays(ts, ps, 2.0, 4.0, 2.0).tolist() == [False, True, False, False]
+    # Neighbours 1.6 s apart: beyond a 1.5 s span nothing is judged.
+    assert not chord_strays(ts, ps, 2.0, 4.0, 1.5).any()
+    # Within the allowance (2 m + 4 x 0.6 x 1.0 / 2 = 3.2 m): kept.
+    near = ps.copy()
+    near[1, 1] = 0.6 + 3.1
+    assert not chord_strays(ts, near, 2.0, 4.0, 2.0).any()
+    assert not chord_strays(ts, ps, 0.0, 4.0, 2.0).any()
+    # Only lone samples are judged with lone_gap: 0.6 s and 1.0 s from its neighbours
+    # it is; with a neighbour 0.1 s away (another object's samples alternating with the
+    # drone's) it is not.
+    assert chord_strays(ts, ps, 2.0, 4.0, 2.0, lone_gap=0.2).tolist() == [0, 1, 0, 0]
+    close = ts.copy()
+    close[0] = 0.5
+    assert chord_strays(close, ps, 2.0, 4.0, 2.0).tolist() == [0, 1, 0, 0]
+    assert not chord_strays(close, ps, 2.0, 4.0, 2.0, lone_gap=0.2).any()
 
 
 def test_returns_off_the_track_heading_end_no_segment():
