@@ -450,11 +450,12 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "stray_chord",
         "bool",
         True,
-        "Offline trajectory: a track sample farther than stray_distance plus "
+        "Offline trajectory: after the stray_distance refits, a lone track sample (two "
+        "frame periods or more from both neighbours) farther than stray_distance plus "
         "link_max_accel x dt1 x dt2 / 2 from the chord between its neighbours (at most "
-        "link_max_gap apart) is left out of the fit, as the delayed output leaves it out: "
-        "a noise return the clustering joined to a drone's track 0.6 s after one of its "
-        "returns and 1.0 s before the next, 5.6 m off its path, which the smoothing "
+        "link_max_gap apart) is left out of a last fit, as the delayed output leaves it "
+        "out: a noise return the clustering joined to a drone's track 0.6 s after one of "
+        "its returns and 1.0 s before the next, 5.6 m off its path, which the smoothing "
         "spline passed through (deviation 136); false = only returns far from the "
         "fitted track are left out.",
     ),
@@ -1255,7 +1256,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "the fitted track are left out and the track fitted again (another object's "
         "returns joined to the drone's). Delayed output (report_lag): a track sample "
         "farther than this (plus link_max_accel x dt1 x dt2 / 2) from the chord between "
-        "its neighbours is left out of the fit. 0 switches both off.",
+        "its neighbours is left out of the fit (offline too with stray_chord). 0 switches "
+        "all of them off.",
         minimum=0.0,
         maximum=100.0,
     ),
