@@ -461,6 +461,7 @@ def extend_track(
     short_gap: np.ndarray | None = None,
     grow_end: bool = True,
     grow_start: bool = True,
+    heading: np.ndarray | None = None,
 ) -> np.ndarray:
     """Grow a selected track at both ends with points of ``pool`` where it was heading.
 
@@ -491,7 +492,9 @@ def extend_track(
     they stay in place and scatter more than a drone's body (:func:`_scattered_stay`).
     ``short_gap`` (N,) bool: pool points that join only within ``max_extrapolation`` of
     the end. ``grow_end`` False: grow the start only; ``grow_start`` False: the end
-    only. Returns the new member mask.
+    only. ``heading`` (N,) bool: the members that define the ends (where and when the
+    track was heading), if any of them does; default all but a lone stray end. Returns
+    the new member mask.
     """
     member = np.asarray(member, dtype=bool).copy()
     pool = np.asarray(pool, dtype=bool) & ~member
@@ -508,6 +511,8 @@ def extend_track(
     # A lone stray return at either end of the track (another object's, joined by the
     # clusterer) stays a member but does not define where the track was heading.
     inner = member & ~_stray_end_points(member, xyz, t, params)
+    if heading is not None and (inner & heading).any():
+        inner &= heading
     hover_gap = float(params.extend_hover_gap)
     far_gap = float(params.extend_far_gap)
     viewpoint = np.asarray(params.viewpoint, dtype=np.float64)

@@ -792,14 +792,57 @@ def extend_selected(
         scored &= ~exclude
     out = labels.copy()
     for c in selected:
+        member = out == c
         grown = extend_track(
-            out == c, xyz, t, pool, params, short_gap=near_floor, grow_end=c not in start_only
+            member,
+            xyz,
+            t,
+            pool,
+            params,
+            short_gap=near_floor,
+            grow_end=c not in start_only,
+            heading=_on_fit(member, xyz, t, float(scores.confidence[c]), params),
         )
         member = fill_track(grown, xyz, t, pool, params)
         member = fill_track(member, xyz, t, scored, params, max_reach=params.track_gate)
         pool &= ~member
         scored &= ~member
         out[member] = c
+    return out
+
+
+#: grow_from_fit: seconds at each end of a track that its own trajectory fit judges.
+ENDS_FIT_SPAN = 4.0
+
+
+def _on_fit(
+    member: np.ndarray, xyz: np.ndarray, t: np.ndarray, confidence: float, params: ParamSet
+) -> np.ndarray | None:
+    """grow_from_fit (deviation 137): (N,) bool, the ``member`` returns within
+    ``stray_distance`` of the track's fitted trajectory (:func:`cluster_trajectory`),
+    where it has one; None with the switch off or no trajectory. Another object's
+    returns at the head or tail of a track's cluster are off it."""
+    if not params.grow_from_fit or params.stray_distance <= 0 or not member.any():
+        return None
+    idx = np.flatnonzero(member)
+    out = member.copy()
+    tm = t[idx]
+    # Only the ends are judged: the first and last ENDS_FIT_SPAN seconds, each fitted
+    # on its own (a smoothing spline's cross-validation over a whole long track costs
+    # as much as the rest of the detection).
+    window = ENDS_FIT_SPAN
+    lo, hi = float(tm.min()), float(tm.max())
+    if hi - lo <= 2 * window:
+        parts = [np.ones(tm.size, dtype=bool)]
+    else:
+        parts = [tm <= lo + window, tm >= hi - window]
+    for part in parts:
+        sel = idx[part]
+        traj = cluster_trajectory(t[sel], xyz[sel], confidence, params)
+        if traj is None:
+            continue
+        off = np.linalg.norm(traj(t[sel]) - xyz[sel], axis=1)
+        out[sel[~(off <= float(params.stray_distance))]] = False  # NaN (no fit there): off
     return out
 
 

@@ -460,6 +460,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "fitted track are left out.",
     ),
     ParamSpec(
+        "grow_from_fit",
+        "bool",
+        True,
+        "Offline growth: a selected track's ends are judged (where it was heading, and "
+        "from when) by its returns within stray_distance of its fitted trajectory only "
+        "(the first and last 4 s of the track, each fitted on its own): "
+        "a bird's seven returns crossing a fast pass's line began the pass's cluster, "
+        "and growth back in time from the bird's end state left the drone's first "
+        "returns as noise (deviation 137); false = by all of its returns but a lone "
+        "stray end.",
+    ),
+    ParamSpec(
         "lead_in_reach",
         "float",
         10.0,

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
 from clusterfilter_ros.core.frame import AVIA, MID360, Frame
+from clusterfilter_ros.core.linking import extend_track
 from clusterfilter_ros.core.offline import (
+    _on_fit,
     bridging_pieces,
     continuing_pieces,
     detect_offline,
@@ -603,3 +606,23 @@ def test_no_stay_where_the_next_leg_did_not_come_from_or_that_scatters():
     assert (stop_between_pieces(labels, xyz, t, scores, [0, 1], params) == labels).all()
     labels, xyz, t, scores, _ = _legs_and_stay(spot, spread=0.5)
     assert (stop_between_pieces(labels, xyz, t, scores, [0, 1], params) == labels).all()
+
+
+def test_growth_judges_a_tracks_start_by_the_returns_on_its_fit():
+    # fast_pass 6504 of the sixty-fourth set, 4.5-10 s: the selected cluster's returns,
+    # whose first seven (5.95-7.36 s) are a bird's crossing the pass's line, and the
+    # pool growth may take near the path: the drone's returns at 5.24, 5.67 and 5.95 s.
+    data = np.load(Path(__file__).parent / "data" / "fast_pass_6504_bird_head.npz")
+    t, xyz, member, pool = data["t"], data["xyz"], data["member"], data["pool"]
+    p = detector_params()
+    heading = _on_fit(member, xyz, t, 0.84, p)
+    assert heading is not None
+    off = member & ~heading
+    assert np.count_nonzero(off) == 7 and t[off].max() < 7.4  # the bird's returns
+    # From the bird's returns the track was heading elsewhere: the drone's earlier
+    # returns stay out. From the drone's own, they join.
+    plain = extend_track(member, xyz, t, pool, p, grow_end=False)
+    assert not plain[pool].any()
+    grown = extend_track(member, xyz, t, pool, p, grow_end=False, heading=heading)
+    assert grown[pool].all()
+    assert _on_fit(member, xyz, t, 0.84, p.copy(grow_from_fit=False)) is None
