@@ -818,10 +818,13 @@ ENDS_FIT_SPAN = 4.0
 def _on_fit(
     member: np.ndarray, xyz: np.ndarray, t: np.ndarray, confidence: float, params: ParamSet
 ) -> np.ndarray | None:
-    """grow_from_fit (deviation 137): (N,) bool, the ``member`` returns within
-    ``stray_distance`` of the track's fitted trajectory (:func:`cluster_trajectory`),
-    where it has one; None with the switch off or no trajectory. Another object's
-    returns at the head or tail of a track's cluster are off it."""
+    """grow_from_fit (deviation 137): (N,) bool, the ``member`` returns that define the
+    track's ends for growth: at each end (its first and last :data:`ENDS_FIT_SPAN`
+    seconds, or all of a track no longer than twice that), those within
+    ``stray_distance`` of the end's own trajectory fit (:func:`cluster_trajectory`);
+    the returns between the two ends, and those of an end without a fit, all count.
+    None with the switch off, ``stray_distance`` 0 or no members. Another object's
+    returns at the head or tail of a track's cluster are off the fit."""
     if not params.grow_from_fit or params.stray_distance <= 0 or not member.any():
         return None
     idx = np.flatnonzero(member)
