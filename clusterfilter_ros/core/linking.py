@@ -486,7 +486,9 @@ def extend_track(
     before or after (:func:`_returned_near`). With ``extend_brake_hover``, an end still
     moving takes, across gaps up to ``extend_hover_gap``, a return where braking would
     have stopped it (:func:`_braking_offsets`) that another pool return confirms there
-    within ``max_gap``: a drone braking into a hover, then seen in lone returns.
+    within ``max_gap``: a drone braking into a hover, then seen in lone returns. With
+    ``extend_stop_hover``, such a return that spans no velocity of its own is an end
+    at rest, and growth goes on from it as from a hovering end (deviation 138).
     With ``extend_stay_scatter``, the returns taken in one direction from the first
     step across more than the usual gap by a slow or braking end on are given back if
     they stay in place and scatter more than a drone's body (:func:`_scattered_stay`).
@@ -519,13 +521,15 @@ def extend_track(
     for forward in [f for f, grow in ((True, grow_end), (False, grow_start)) if grow]:
         taken = np.zeros(pool_idx.size, dtype=bool)
         slow = False
+        stopped = False  # the last step took a return where a braking end stopped
         stay = np.zeros(pool_idx.size, dtype=bool)  # taken since the first long pause
         paused = False
         while True:
             m = np.nonzero(inner)[0]
             edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
-            if vel is None and slow and hover_gap > gap:
-                # A lone return taken across a hover's pause: still hovering there.
+            if vel is None and (slow or stopped) and hover_gap > gap:
+                # A lone return taken across a hover's pause, or where a braking end
+                # came to a stop (extend_stop_hover): hovering there.
                 vel = np.zeros(3)
             slow = vel is not None and float(np.linalg.norm(vel)) < params.min_speed
             end_range = float(np.linalg.norm(pos - viewpoint))
@@ -615,6 +619,7 @@ def extend_track(
             near_t = adt[ok].min()
             join = cand[ok & (adt <= near_t + fp / 2)]
             paused = paused or (near_t > gap and (slow or braking))
+            stopped = bool(params.extend_stop_hover) and near_t > gap and braking
             stay[join] = paused
             taken[join] = True
             member[pool_idx[join]] = True

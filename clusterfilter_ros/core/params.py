@@ -803,6 +803,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "report_extend_brake; false = such ends grow across extend_max_gap only.",
     ),
     ParamSpec(
+        "extend_stop_hover",
+        "bool",
+        True,
+        "Offline: a return a braking end took across more than extend_max_gap "
+        "(extend_brake_hover), where it would have stopped, is an end at rest: when it "
+        "alone spans no velocity, growth goes on from it as from a hovering end "
+        "(extend_hover_gap, track_gate), taking the hover's returns before a drone sped "
+        "away from it (deviation 138); false = such a return's end grows no further than "
+        "one frame.",
+    ),
+    ParamSpec(
         "extend_stay_scatter",
         "bool",
         True,

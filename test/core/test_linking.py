@@ -653,6 +653,22 @@ def test_extend_track_reaches_back_to_the_hover_a_drone_sped_away_from():
     assert not extend_track(member, xyz, t, ~member, gentle)[~member].any()
 
 
+def test_extend_track_reaches_back_through_a_hover_more_than_link_max_gap_before():
+    # Default 6604 of the sixty-fifth set: a drone hovered 15 m out, seen in lone
+    # returns, then climbed away; its track began 2.3 s after the hover's last return.
+    # Growing back, the braking rule takes that return where the drone had stopped, but
+    # alone (its neighbour inward beyond link_max_gap) it spans no velocity. Deviation
+    # 138: it is an end at rest, and the hover's earlier returns join as a hover's do.
+    xyz, t = _braking_into_a_hover((3.67, 0.0), delay=1.0)
+    t = 20.0 - t
+    member = t > 10.0
+    hover = ~member
+    assert t[member].min() - t[hover].max() > detector_params().link_max_gap
+    assert extend_track(member, xyz, t, hover, detector_params())[hover].all()
+    off = detector_params({"extend_stop_hover": False})
+    assert np.count_nonzero(extend_track(member, xyz, t, hover, off)[hover]) == 1
+
+
 def _hover_with_a_pause(earlier: list[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
     """Take-off seed 2301 of the twenty-second fresh set: a drone hovering 35 m out, its
     returns once or twice a second, with a pause of 2.35 s (12.92 -> 15.27 s) longer than
