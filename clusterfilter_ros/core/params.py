@@ -1483,6 +1483,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "estimate beside such a return was 2-4 m off the pass); false = neither.",
     ),
     ParamSpec(
+        "stream_keep_reported",
+        "bool",
+        True,
+        "Streaming: a re-clustering whose first-ranked candidate is another object keeps "
+        "the reported track when the track's own cluster is slower than min_speed (a "
+        "hover's), has returns within max_gap of now and passes the hysteresis "
+        "(keep_confidence), as it would with no other candidate: a drone leaving a hover "
+        "scores low for a second, and a bird ranked above it took the live output over "
+        "(deviation 139); false = the first-ranked candidate replaces it.",
+    ),
+    ParamSpec(
         "report_extend_brake",
         "bool",
         False,

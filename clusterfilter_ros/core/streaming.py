@@ -1808,6 +1808,13 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 )
                 if kept is not None:
                     return choice(kept[0], kept[1], True, k)
+        if p.stream_keep_reported and snap.expected is not None and snap.newest is not None:
+            # Deviation 139: another object's cluster ranks first while the reported
+            # track's own cluster, a hover's the drone is leaving, still passes the
+            # hysteresis.
+            kept_mask = _kept_over(best, snap, labels, xyz, t, scores, p)
+            if kept_mask is not None:
+                return choice(kept_mask, float(p.min_confidence), False, k)
         return choice(labels == best, float(scores.confidence[best]), True, k)
     if p.keep_confidence >= p.min_confidence or snap.expected is None:
         return choice(None, 0.0, False, k)
@@ -2407,6 +2414,34 @@ def _joined_track(
             float(rescored.rank_score(scoring.scoring)[o]),
         )
     return None
+
+
+def _kept_over(
+    best: int,
+    snap: _HistorySnapshot,
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    scoring: ParamSet,
+) -> np.ndarray | None:
+    """``stream_keep_reported``: the mask of the reported track's cluster (the one
+    holding its recent points near its prediction) when ``best``, the candidate that
+    would replace it, is another cluster, and that cluster is slower than
+    ``min_speed`` (a hover's), still has returns within ``max_gap`` of now and passes
+    the hysteresis (a candidate with ``keep_confidence``); else None."""
+    assert snap.expected is not None and snap.newest is not None
+    predicted, gate = snap.expected
+    c = _track_cluster(predicted, gate, labels, xyz, t, snap.now - scoring.track_window)
+    if c is None or c == best:
+        return None
+    if snap.now - float(scores.t_last[c]) > scoring.max_gap:
+        return None
+    if not (scores.candidate[c] and scores.confidence[c] >= scoring.keep_confidence):
+        return None
+    if scores.apparent_speed[c] >= scoring.min_speed:
+        return None
+    return labels == c
 
 
 def _competing_track(

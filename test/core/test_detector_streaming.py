@@ -18,6 +18,7 @@ from clusterfilter_ros.core.streaming import (
     StreamingDetector,
     _competing_track,
     _joined_track,
+    _kept_over,
     _off_reported,
     _split_track,
     _track_samples,
@@ -936,6 +937,45 @@ def test_a_track_hidden_for_a_moment_competes_with_the_object_that_ranks_first()
     assert compete(0.9, 30.0, 2.16, reported=alone) is None
     # The fragment began too long after the earlier piece for one track (reacquire_window).
     assert compete(0.9, 30.0, 2.16, params=p.copy(reacquire_window=2.0)) is None
+
+
+def test_a_drone_leaving_its_hover_keeps_the_live_output_from_a_bird_ranked_above_it():
+    # Deviation 139 (`default` seed 6704 of the sixty-sixth set): the drone hovered for
+    # 6.5 s, then climbed away; its cluster (0), mostly the hover, scored 0.35 for a
+    # second, under min_confidence but over keep_confidence, and a bird 37 m away
+    # (cluster 1, confidence 0.83) ranked first and took the live output over.
+    p = detector_params()
+    t_hover = np.repeat(np.arange(8.0, 14.3, 0.1), 2)
+    t_climb = np.repeat(np.arange(14.3, 14.55, 0.05), 2)
+    t_bird = np.repeat(np.arange(9.1, 14.75, 0.1), 2)
+    hover = np.tile([8.8, 10.1, 12.5], (t_hover.size, 1))
+    climb = np.column_stack(
+        [np.full(t_climb.size, 8.6), np.full(t_climb.size, 9.8), 12.5 + 4.4 * (t_climb - 14.3)]
+    )
+    bird = np.column_stack(
+        [-20.0 + 6.7 * (t_bird - 9.1), np.full(t_bird.size, -28.0), np.full(t_bird.size, 20.0)]
+    )
+    t = np.concatenate([t_hover, t_climb, t_bird])
+    xyz = np.vstack([hover, climb, bird]).astype(np.float32)
+    labels = np.repeat([0, 0, 1], [t_hover.size, t_climb.size, t_bird.size])
+    now = 14.8
+    snap = types.SimpleNamespace(
+        now=now, expected=(climb[-1], p.track_gate), newest=(float(t_climb[-1]), climb[-1])
+    )
+
+    def keep(confidence: float = 0.35, speed: float = 0.54, last: float = 14.5, params=p):
+        scores = _Scores(2, True, 0.83)
+        scores.confidence[0] = confidence
+        scores.apparent_speed = np.array([speed, 6.7])
+        scores.t_last = np.array([last, float(t_bird.max())])
+        return _kept_over(1, snap, labels, xyz, t, scores, params)
+
+    kept = keep()
+    assert kept is not None and (kept == (labels == 0)).all()
+    assert keep(confidence=p.keep_confidence - 0.01) is None  # fails the hysteresis
+    assert keep(speed=p.min_speed) is None  # a moving track's cluster: ranking decides
+    assert keep(last=now - p.max_gap - 0.1) is None  # no returns for longer than max_gap
+    assert _kept_over(0, snap, labels, xyz, t, _Scores(2, True, 0.83), p) is None  # itself
 
 
 # ------------------------------------------------------------ background re-clustering
