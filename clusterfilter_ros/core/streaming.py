@@ -1808,7 +1808,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 )
                 if kept is not None:
                     return choice(kept[0], kept[1], True, k)
-        if p.stream_keep_reported and snap.expected is not None and snap.newest is not None:
+        if p.stream_keep_reported and snap.expected is not None:
             # Deviation 139: another object's cluster ranks first while the reported
             # track's own cluster, a hover's the drone is leaving, still passes the
             # hysteresis.
@@ -2430,7 +2430,8 @@ def _kept_over(
     would replace it, is another cluster, and that cluster is slower than
     ``min_speed`` (a hover's), still has returns within ``max_gap`` of now and passes
     the hysteresis (a candidate with ``keep_confidence``); else None."""
-    assert snap.expected is not None and snap.newest is not None
+    if snap.expected is None:  # no reported track
+        return None
     predicted, gate = snap.expected
     c = _track_cluster(predicted, gate, labels, xyz, t, snap.now - scoring.track_window)
     if c is None or c == best:
