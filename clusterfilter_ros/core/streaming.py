@@ -1792,10 +1792,14 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     if chosen:
         # The selected cluster that was seen last is the one being tracked.
         best = max(chosen[:3], key=lambda c: scores.t_last[c])
+        # The cluster holding the reported track's recent points near its prediction.
+        reported = None
+        if snap.expected is not None and (p.reacquire_join or p.stream_keep_reported):
+            reported = _track_cluster(*snap.expected, labels, xyz, t, snap.now - p.track_window)
         if p.reacquire_join and snap.expected is not None and snap.newest is not None:
             # The selected cluster (the reported track's earlier returns) ended before a
             # fragment near where the track would be now began.
-            c = _track_cluster(*snap.expected, labels, xyz, t, snap.now - p.track_window)
+            c = reported
             if c is not None and c != best and scores.t_first[c] > scores.t_last[best]:
                 joined = _joined_track(best, c, labels, xyz, t, k, scorer, ps, structure)
                 if joined is not None:
@@ -1808,13 +1812,11 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
                 )
                 if kept is not None:
                     return choice(kept[0], kept[1], True, k)
-        if p.stream_keep_reported and snap.expected is not None:
+        if p.stream_keep_reported and _kept_over(reported, best, snap.now, scores, p):
             # Deviation 139: another object's cluster ranks first while the reported
             # track's own cluster, a hover's the drone is leaving, still passes the
             # hysteresis.
-            kept_mask = _kept_over(best, snap, labels, xyz, t, scores, p)
-            if kept_mask is not None:
-                return choice(kept_mask, float(p.min_confidence), False, k)
+            return choice(labels == reported, float(p.min_confidence), False, k)
         return choice(labels == best, float(scores.confidence[best]), True, k)
     if p.keep_confidence >= p.min_confidence or snap.expected is None:
         return choice(None, 0.0, False, k)
@@ -1825,7 +1827,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     c = _track_cluster(predicted, gate, labels, xyz, t, snap.now - p.track_window)
     if c is None:
         return choice(None, 0.0, False, k, coast=True)
-    if scores.candidate[c] and scores.confidence[c] >= p.keep_confidence:
+    if _passes_keep(scores, c, p):
         return choice(labels == c, float(p.min_confidence), False, k)
     if p.split_merged and p.stream_split_track:
         # The reported track's cluster fails: another object may have joined it.
@@ -2299,7 +2301,7 @@ def _split_track(
     if begins > max(snap.track_from, tm.min()) + window and not _few_before(snap, begins - window):
         return None
     scores = scorer(pieces, xm, tm, params, n_clusters=n)
-    if not (scores.candidate[piece] and scores.confidence[piece] >= params.keep_confidence):
+    if not _passes_keep(scores, piece, params):
         return None
     mask = np.zeros(labels.size, dtype=bool)
     mask[member[pieces == piece]] = True
@@ -2353,7 +2355,7 @@ def _hovering_track(
         params=scoring.copy(hover_min_frames=scoring.hover_keep_frames),
         n_clusters=k,
     )
-    if relaxed.candidate[c] and relaxed.confidence[c] >= scoring.keep_confidence:
+    if _passes_keep(relaxed, c, scoring):
         return labels == c
     return None
 
@@ -2407,7 +2409,7 @@ def _joined_track(
     joined = labels.copy()
     joined[labels == c] = o
     rescored = scorer(joined, xyz, t, params=scoring, n_clusters=k)
-    if rescored.candidate[o] and rescored.confidence[o] >= scoring.keep_confidence:
+    if _passes_keep(rescored, o, scoring):
         return (
             joined == o,
             float(rescored.confidence[o]),
@@ -2416,33 +2418,27 @@ def _joined_track(
     return None
 
 
+def _passes_keep(scores: ClusterScores, c: int, scoring: ParamSet) -> bool:
+    """Whether cluster ``c`` passes the hysteresis: a candidate with at least
+    ``keep_confidence``."""
+    return bool(scores.candidate[c] and scores.confidence[c] >= scoring.keep_confidence)
+
+
 def _kept_over(
-    best: int,
-    snap: _HistorySnapshot,
-    labels: np.ndarray,
-    xyz: np.ndarray,
-    t: np.ndarray,
-    scores: ClusterScores,
-    scoring: ParamSet,
-) -> np.ndarray | None:
-    """``stream_keep_reported``: the mask of the reported track's cluster (the one
-    holding its recent points near its prediction) when ``best``, the candidate that
-    would replace it, is another cluster, and that cluster is slower than
-    ``min_speed`` (a hover's), still has returns within ``max_gap`` of now and passes
-    the hysteresis (a candidate with ``keep_confidence``); else None."""
-    if snap.expected is None:  # no reported track
-        return None
-    predicted, gate = snap.expected
-    c = _track_cluster(predicted, gate, labels, xyz, t, snap.now - scoring.track_window)
-    if c is None or c == best:
-        return None
-    if snap.now - float(scores.t_last[c]) > scoring.max_gap:
-        return None
-    if not (scores.candidate[c] and scores.confidence[c] >= scoring.keep_confidence):
-        return None
-    if scores.apparent_speed[c] >= scoring.min_speed:
-        return None
-    return labels == c
+    reported: int | None, best: int, now: float, scores: ClusterScores, scoring: ParamSet
+) -> bool:
+    """``stream_keep_reported``: whether the reported track's cluster ``reported`` (the
+    one holding its recent points near its prediction, None if there is none) stays the
+    track although ``best``, another cluster, ranks first: it is slower than
+    ``min_speed`` (a hover's), still has returns within ``max_gap`` of ``now`` and
+    passes the hysteresis (:func:`_passes_keep`)."""
+    return (
+        reported is not None
+        and reported != best
+        and now - float(scores.t_last[reported]) <= scoring.max_gap
+        and _passes_keep(scores, reported, scoring)
+        and bool(scores.apparent_speed[reported] < scoring.min_speed)
+    )
 
 
 def _competing_track(

@@ -21,6 +21,7 @@ from clusterfilter_ros.core.streaming import (
     _kept_over,
     _off_reported,
     _split_track,
+    _track_cluster,
     _track_samples,
     run_streaming,
 )
@@ -959,23 +960,24 @@ def test_a_drone_leaving_its_hover_keeps_the_live_output_from_a_bird_ranked_abov
     xyz = np.vstack([hover, climb, bird]).astype(np.float32)
     labels = np.repeat([0, 0, 1], [t_hover.size, t_climb.size, t_bird.size])
     now = 14.8
-    snap = types.SimpleNamespace(
-        now=now, expected=(climb[-1], p.track_gate), newest=(float(t_climb[-1]), climb[-1])
-    )
+    # The reported track's cluster: the one holding its recent returns near its
+    # prediction (the climb's last position).
+    reported = _track_cluster(climb[-1], p.track_gate, labels, xyz, t, now - p.track_window)
+    assert reported == 0
 
     def keep(confidence: float = 0.35, speed: float = 0.54, last: float = 14.5, params=p):
         scores = _Scores(2, True, 0.83)
         scores.confidence[0] = confidence
         scores.apparent_speed = np.array([speed, 6.7])
         scores.t_last = np.array([last, float(t_bird.max())])
-        return _kept_over(1, snap, labels, xyz, t, scores, params)
+        return _kept_over(reported, 1, now, scores, params)
 
-    kept = keep()
-    assert kept is not None and (kept == (labels == 0)).all()
-    assert keep(confidence=p.keep_confidence - 0.01) is None  # fails the hysteresis
-    assert keep(speed=p.min_speed) is None  # a moving track's cluster: ranking decides
-    assert keep(last=now - p.max_gap - 0.1) is None  # no returns for longer than max_gap
-    assert _kept_over(0, snap, labels, xyz, t, _Scores(2, True, 0.83), p) is None  # itself
+    assert keep()
+    assert not keep(confidence=p.keep_confidence - 0.01)  # fails the hysteresis
+    assert not keep(speed=p.min_speed)  # a moving track's cluster: ranking decides
+    assert not keep(last=now - p.max_gap - 0.1)  # no returns for longer than max_gap
+    assert not _kept_over(0, 0, now, _Scores(2, True, 0.83), p)  # itself
+    assert not _kept_over(None, 1, now, _Scores(2, True, 0.83), p)  # no reported track
 
 
 # ------------------------------------------------------------ background re-clustering
