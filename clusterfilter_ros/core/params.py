@@ -1622,6 +1622,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "passes keep_confidence; false = such a fragment must be confirmed as a new track.",
     ),
     ParamSpec(
+        "reacquire_newest",
+        "bool",
+        True,
+        "Streaming (needs reacquire_join): where no recent return lies near where the "
+        "reported track would be now, the cluster holding its newest returns (within "
+        "track_window before its newest sample, within track_gate of it) is the fragment "
+        "tried for the join: a drone 95 m up seen in bursts 0.5-1 s apart, whose last "
+        "returns lay 7 m behind its predicted position, was given up (deviation 140); "
+        "false = only returns near the predicted position count.",
+    ),
+    ParamSpec(
         "reacquire_compete",
         "bool",
         True,

@@ -1800,6 +1800,10 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             # The selected cluster (the reported track's earlier returns) ended before a
             # fragment near where the track would be now began.
             c = reported
+            if c is None and p.reacquire_newest:
+                # Deviation 140: a sparse track's newest returns (an Avia's bursts 95 m
+                # up) lie behind where it would be now, outside track_gate.
+                c = _newest_cluster(snap, labels, xyz, t, p)
             if c is not None and c != best and scores.t_first[c] > scores.t_last[best]:
                 joined = _joined_track(best, c, labels, xyz, t, k, scorer, ps, structure)
                 if joined is not None:

@@ -817,6 +817,37 @@ def test_a_track_resumes_after_a_gap_too_long_for_linking(drone_path_fn):
     assert before == [(e.stamp, tuple(e.position)) for e in fresh if e.stamp - 1000.0 < 10.5]
 
 
+def test_a_sparse_track_resumes_from_its_newest_returns_behind_its_prediction():
+    # Deviation 140 (flyover seed 6901 of the sixty-eighth set): a drone 95 m up at
+    # 10 m/s came back after 2.3 s (past link_max_gap) in bursts 0.8 s apart. At a
+    # re-clustering its newest returns lay 0.5-0.8 s back, 5-8 m behind where the track
+    # would be now, so no recent return lay near the prediction and the fragment was
+    # never joined to the track: it was given up while its returns went on.
+    rng = np.random.default_rng(0)
+
+    def path(t: float) -> np.ndarray:
+        return np.array([-40.0 + 10.0 * t, 5.0, 30.0])
+
+    frames = []
+    for i in range(140):
+        t = round(i * 0.1, 6)
+        parts = [_wall(rng)]
+        if t < 8.0 or (t >= 10.3 and (t - 10.3) % 0.8 < 0.15):
+            parts.append(path(t) + rng.normal(0, 0.1, (3, 3)))
+        frames.append(Frame(1000.0 + t, MID360, np.vstack(parts).astype(np.float32)))
+    resumed = run_streaming(frames, detector_params({"reacquire_newest": True}))
+    lost = run_streaming(frames, detector_params({"reacquire_newest": False}))
+    late = [e for e in resumed if e.stamp - 1000.0 >= 11.5]
+    assert len(late) >= 10
+    for e in late:
+        assert np.linalg.norm(e.position - path(e.stamp - 1000.0)) < 0.5
+    assert not [e for e in lost if e.stamp - 1000.0 >= 11.0]
+    # Nothing changes before the gap.
+    before = [(e.stamp, tuple(e.position)) for e in resumed if e.stamp - 1000.0 < 10.0]
+    assert before == [(e.stamp, tuple(e.position)) for e in lost if e.stamp - 1000.0 < 10.0]
+    assert before
+
+
 class _Scores:
     """What _joined_track and _competing_track read of a scoring: every cluster alike,
     ranked as normalized scoring ranks (confidence x log(1 + frames))."""
