@@ -61,6 +61,7 @@ from clusterfilter_ros.core.preprocess import points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import ClusterScores, score_clusters, select_clusters
 from clusterfilter_ros.core.splitting import (
     Scorer,
+    kinematic_tracks,
     score_pieces,
     split_and_score,
     split_long,
@@ -284,8 +285,10 @@ def select_trimmed(
         if c in chosen:
             continue
         member = np.nonzero(labels == c)[0]
-        if any(_elsewhere(member, track, xyz, t, params) for track in whole):
+        apart = _apart_from(member, whole, xyz, t, params)
+        if apart.all():
             continue
+        elsewhere, member = member[apart], member[~apart]
         covered = np.zeros(member.size, dtype=bool)
         for first, last in spans:
             covered |= (t[member] >= first) & (t[member] <= last)
@@ -297,6 +300,8 @@ def select_trimmed(
             continue
         labels[member[covered]] = -1
         trimmed[member[covered]] = True
+        labels[elsewhere] = -1
+        trimmed[elsewhere] = True
         chosen.append(c)
         spans += occupied_spans(t[rest], gap)
     return labels, chosen, trimmed
@@ -308,6 +313,43 @@ APART_OBJECTS = 10.0
 #: Moments (frame samples of one track with one of the other within two frame periods)
 #: that make two tracks simultaneous for :func:`_elsewhere`.
 APART_MIN_MOMENTS = 3
+
+
+def _apart_from(
+    member: np.ndarray,
+    tracks: list[np.ndarray],
+    xyz: np.ndarray | None,
+    t: np.ndarray,
+    params: ParamSet,
+) -> np.ndarray:
+    """Mask of the candidate's points ``member`` that are another object flying at the
+    same time as one of ``tracks`` (:func:`_elsewhere`; none without ``xyz``). With
+    ``apart_segments`` each segment of the candidate (its returns cut where they are
+    more than ``max_gap`` apart, as the trajectory cuts them) is judged alone, else the
+    whole candidate: a bird's returns 2 s before the drone's began the cluster of the
+    drone's second half (deviation 141). When some segments are apart and some not, the
+    rest is split into kinematic tracks and those with fewer than ``min_cluster_points``
+    returns are apart too: the same bird's last returns, in the drone's segment."""
+    apart = np.zeros(member.size, dtype=bool)
+    if xyz is None or not tracks or member.size == 0:
+        return apart
+    order = np.argsort(t[member], kind="stable")
+    pieces = [order]
+    if params.apart_segments:
+        cuts = np.flatnonzero(np.diff(t[member][order]) > params.max_gap) + 1
+        pieces = np.split(order, cuts)
+    for piece in pieces:
+        if any(_elsewhere(member[piece], track, xyz, t, params) for track in tracks):
+            apart[piece] = True
+    if apart.any() and not apart.all():
+        # The candidate held another object: the rest is split into kinematic tracks, as
+        # a merged cluster is, and those too small to be a candidate are left out too
+        # (the bird's last returns before the drone's, in the segment the drone's began).
+        rest = np.flatnonzero(~apart)
+        tracks_of = kinematic_tracks(xyz[member[rest]], t[member[rest]], params)
+        small = np.bincount(tracks_of)[tracks_of] < params.min_cluster_points
+        apart[rest[small]] = True
+    return apart
 
 
 def _elsewhere(

@@ -1237,6 +1237,19 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=600.0,
     ),
     ParamSpec(
+        "apart_segments",
+        "bool",
+        True,
+        "Offline: a qualifying candidate that overlaps a selected track in time is judged "
+        "another object flying elsewhere (never within 10 m of the track at the moments "
+        "both are seen) segment by segment, its returns cut where they are more than "
+        "max_gap apart: the segments elsewhere are left out, and so are the kinematic "
+        "tracks of the rest too small to be a candidate (min_cluster_points); what "
+        "remains is kept as any such candidate (a bird's returns 2 s before the drone's "
+        "began the cluster of the drone's second half, and the whole cluster was dropped: "
+        "deviation 141); false = the candidate is judged and dropped whole.",
+    ),
+    ParamSpec(
         "stream_min_track_seconds",
         "float",
         0.0,

@@ -165,6 +165,46 @@ def test_a_candidate_seen_far_from_the_selected_track_at_the_same_moments_is_lef
     assert chosen == [1, 0]
 
 
+def test_a_candidate_is_judged_elsewhere_segment_by_segment():
+    # Deviation 141 (take-off 6803 of the sixty-seventh set): a bird's returns, 18 m from
+    # the selected first half of the drone's flight, began the cluster of its second
+    # half 2 s before the drone's own returns. Judged whole, the cluster was another
+    # object and the drone's second half was not reported.
+    params = detector_params()
+    t1 = np.arange(0.0, 10.0, 0.1)  # the selected track, along x
+    head = np.arange(8.0, 9.0, 0.1)  # the bird, 30 m away at the same moments
+    rest = np.arange(10.5, 18.0, 0.1)  # the drone again, 1.5 s later (past max_gap)
+    late = np.arange(10.5, 11.0, 0.1)  # the bird's last returns, 15 m from the drone
+    xyz = np.concatenate(
+        [
+            np.stack([t1, np.zeros_like(t1), np.full_like(t1, 20.0)], 1),
+            np.stack([head, np.full_like(head, 30.0), np.full_like(head, 20.0)], 1),
+            np.stack([rest, np.zeros_like(rest), np.full_like(rest, 20.0)], 1),
+            np.stack([late, np.full_like(late, 15.0), np.full_like(late, 20.0)], 1),
+        ]
+    ).astype(np.float32)
+    t = np.concatenate([t1, head, rest, late])
+    labels = np.repeat([1, 0, 0, 0], [t1.size, head.size, rest.size, late.size])
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    scores = dataclasses.replace(
+        scores, candidate=np.array([True, True]), confidence=np.array([0.7, 0.9])
+    )
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], params, xyz=xyz)
+    assert chosen == [1, 0]
+    # The bird's segment is left out, and so are its returns in the drone's segment: a
+    # kinematic track too small to be a candidate.
+    bird = (labels == 0) & ((t < 9.5) | (xyz[:, 1] > 10.0))
+    assert np.array_equal(trimmed, bird) and np.all(out[bird] == -1)
+    assert np.array_equal(out[~bird], labels[~bird])
+    whole = params.copy(apart_segments=False)
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], whole, xyz=xyz)
+    assert chosen == [1] and not trimmed.any() and np.array_equal(out, labels)
+    # A gap within max_gap keeps the candidate one segment: judged whole, left out.
+    close = np.where(labels == 0, np.where(t < 9.5, t + 0.7, t), t)
+    out, chosen, _ = select_trimmed(labels, close, scores, [1], params, xyz=xyz)
+    assert chosen == [1]
+
+
 def _two_overlapping_positions(
     labels: np.ndarray, t: np.ndarray, apart: float, crossing: float | None = None
 ) -> np.ndarray:
