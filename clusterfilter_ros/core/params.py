@@ -1637,13 +1637,16 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "reacquire_newest",
         "bool",
-        True,
+        False,
         "Streaming (needs reacquire_join): where no recent return lies near where the "
         "reported track would be now, the cluster holding its newest returns (within "
         "track_window before its newest sample, within track_gate of it) is the fragment "
         "tried for the join: a drone 95 m up seen in bursts 0.5-1 s apart, whose last "
         "returns lay 7 m behind its predicted position, was given up (deviation 140); "
-        "false = only returns near the predicted position count.",
+        "false = only returns near the predicted position count. Off: on 1073 streaming "
+        "runs it gained in ten (live up to +5.1 points) and lost late in four (flyover "
+        "3103 96.9 -> 82.7%: the joined track's end, a lone burst, does not grow, and "
+        "the frames it fills are released only after a live report).",
     ),
     ParamSpec(
         "reacquire_compete",
