@@ -260,6 +260,8 @@ def select_trimmed(
     cluster of ``selected`` and never within :data:`APART_OBJECTS` of it
     (:func:`_elsewhere`) is another object flying at the same time, and is not added
     (deviation 121): a bird's leg 40 m from the drone's pass, which began before it.
+    With ``apart_segments`` that is judged per segment of the candidate, and only what
+    is elsewhere is left out, trimmed (:func:`_apart_from`, deviation 141).
     Returns (labels with the trimmed points set to -1, selected clusters best first,
     mask of the trimmed points).
     """
