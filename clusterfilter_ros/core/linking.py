@@ -429,7 +429,7 @@ def link_fragments(
     return out, int(compact.max()) + 1
 
 
-def _end_state(
+def end_state(
     t: np.ndarray, xyz: np.ndarray, params: ParamSet, forward: bool
 ) -> tuple[float, np.ndarray, np.ndarray | None]:
     """(time, position, velocity or None) at the last (``forward``) or first point.
@@ -473,7 +473,7 @@ def extend_track(
     ``link_max_gap``) beyond the end: a fast pass far away leaves returns 1-1.5 s apart.
     An end whose samples within ``link_fit_window`` span less than three frame periods
     (one sample alone, or two frames 0.1 s apart) takes its velocity over the nearest
-    sample further inward (:func:`_end_state`; not near the ground). A point within
+    sample further inward (:func:`end_state`; not near the ground). A point within
     ``link_gate`` of where the track would be had it braked along its way harder than
     ``link_max_accel``, up to ``extend_max_brake`` (:func:`_braking_offsets`), joins it
     too: a drone stopping into a hover (backwards in time: speeding away from one). An
@@ -526,7 +526,7 @@ def extend_track(
         paused = False
         while True:
             m = np.nonzero(inner)[0]
-            edge, pos, vel = _end_state(t[m], xyz[m], params, forward)
+            edge, pos, vel = end_state(t[m], xyz[m], params, forward)
             if vel is None and (slow or stopped) and hover_gap > gap:
                 # A lone return taken across a hover's pause, or where a braking end
                 # came to a stop (extend_stop_hover): hovering there.

@@ -48,6 +48,7 @@ from clusterfilter_ros.core.estimate import reported_positions
 from clusterfilter_ros.core.frame import Frame, TimedPositions
 from clusterfilter_ros.core.linking import (
     chains_formed,
+    end_state,
     extend_track,
     fill_track,
     frame_sample_ids,
@@ -315,6 +316,44 @@ APART_OBJECTS = 10.0
 #: Moments (frame samples of one track with one of the other within two frame periods)
 #: that make two tracks simultaneous for :func:`_elsewhere`.
 APART_MIN_MOMENTS = 3
+
+
+def without_end_objects(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, tracks: list[int], params: ParamSet
+) -> np.ndarray:
+    """``end_objects`` (deviation 142): labels with another object's returns at a selected
+    track's ends set to noise. Each of ``tracks`` is split into kinematic tracks (as a
+    merged cluster is); one with fewer than ``min_cluster_points`` returns lying wholly
+    after the largest one's last return (or wholly before its first), whose first (last)
+    return lies beyond the linking reach (:func:`~.linking.linking_reach`) of where that
+    end was heading (:func:`~.linking.end_state`), is another object the clusterer
+    joined to the track where the two met: a bird passing the drone as it left. As
+    noise, growth takes back only what lies where the track was heading."""
+    out = labels
+    for c in tracks:
+        member = np.flatnonzero(labels == c)
+        if member.size < 2:
+            continue
+        tm, pm = t[member], xyz[member].astype(np.float64)
+        which = kinematic_tracks(pm, tm, params)
+        counts = np.bincount(which)
+        main = which == int(np.argmax(counts))
+        for forward in (True, False):
+            edge, position, velocity = end_state(tm[main], pm[main], params, forward)
+            for k in np.flatnonzero(counts < params.min_cluster_points):
+                mine = which == k
+                beyond = tm[mine] > edge if forward else tm[mine] < edge
+                if not beyond.all():
+                    continue
+                i = int(np.argmin(tm[mine]) if forward else np.argmax(tm[mine]))
+                dt = float(tm[mine][i]) - edge
+                heading = position if velocity is None else position + velocity * dt
+                far = np.linalg.norm(pm[mine][i] - heading) > linking_reach(dt, params)
+                if far:
+                    if out is labels:
+                        out = labels.copy()
+                    out[member[mine]] = -1
+    return out
 
 
 def _apart_from(
@@ -1101,6 +1140,8 @@ def detect_offline(
     spans = tracked_spans(labels, xyz, t, scores, params)
     whole = select_clusters(spans, params)
     labels, selected, trimmed = select_trimmed(labels, t, spans, whole, params, was_split, xyz=xyz)
+    if params.end_objects:
+        labels = without_end_objects(labels, xyz, t, whole, params)
     selected = reachable_pieces(
         labels, xyz, t, selected, params, frozenset(selected) - frozenset(whole)
     )

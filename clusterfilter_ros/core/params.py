@@ -1250,6 +1250,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "deviation 141); false = the candidate is judged and dropped whole.",
     ),
     ParamSpec(
+        "end_objects",
+        "bool",
+        True,
+        "Offline: each track selected whole is split into kinematic tracks; one with "
+        "fewer than min_cluster_points returns wholly after the largest one's last return "
+        "(or before its first), beginning beyond the linking reach of where that end was "
+        "heading, is another object the clusterer joined at the track's end and becomes "
+        "noise, which growth takes back only where the track was heading (a bird flying "
+        "past a leaving drone: the track turned and followed it for 0.8 s, deviation 142); "
+        "false = the whole cluster is the track.",
+    ),
+    ParamSpec(
         "stream_min_track_seconds",
         "float",
         0.0,

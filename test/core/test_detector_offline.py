@@ -20,6 +20,7 @@ from clusterfilter_ros.core.offline import (
     select_trimmed,
     stop_between_pieces,
     tracked_spans,
+    without_end_objects,
 )
 from clusterfilter_ros.core.params import detector_params
 from clusterfilter_ros.core.scoring import score_clusters, select_clusters
@@ -203,6 +204,48 @@ def test_a_candidate_is_judged_elsewhere_segment_by_segment():
     close = np.where(labels == 0, np.where(t < 9.5, t + 0.7, t), t)
     out, chosen, _ = select_trimmed(labels, close, scores, [1], params, xyz=xyz)
     assert chosen == [1]
+
+
+def test_another_object_joined_at_a_tracks_end_is_left_to_growth():
+    # Deviation 142 (fast_pass 6802 of the sixty-seventh set): a bird flying past the
+    # leaving drone was linked to the end of its cluster; the track turned and followed
+    # the bird for 0.8 s (RMSE 5.8 m).
+    params = detector_params()
+    rng = np.random.default_rng(3)
+    t_drone = np.repeat(np.arange(0.0, 6.0, 0.1), 2)
+    drone = np.stack([8.0 * t_drone, -6.0 * t_drone, np.full_like(t_drone, 10.0)], 1)
+    t_bird = np.arange(6.05, 6.85, 0.1)  # 8 returns from 3 m beside the drone's end
+    bird = np.stack(
+        [
+            np.full_like(t_bird, 45.0),
+            -36.0 + 3.0 + 11.0 * (t_bird - 6.05),
+            np.full_like(t_bird, 9.0),
+        ],
+        1,
+    )
+    xyz = np.concatenate([drone, bird]) + rng.normal(0.0, 0.05, (t_drone.size + t_bird.size, 3))
+    t = np.concatenate([t_drone, t_bird])
+    labels = np.zeros(t.size, dtype=np.int64)
+    out = without_end_objects(labels, xyz, t, [0], params)
+    bird_at = np.arange(t.size) >= t_drone.size
+    assert np.all(out[bird_at] == -1) and np.all(out[~bird_at] == 0)
+    # The same before the track's start (time reversed), and nothing without it.
+    out = without_end_objects(labels, xyz, -t, [0], params)
+    assert np.all(out[bird_at] == -1) and np.all(out[~bird_at] == 0)
+    # As many returns as a candidate needs: an object of its own, kept (deviation 141
+    # and the selection judge those).
+    big = params.copy(min_cluster_points=len(t_bird))
+    assert np.array_equal(without_end_objects(labels, xyz, t, [0], big), labels)
+    # Another cluster's labels are not touched.
+    other = np.where(bird_at, 1, 0)
+    assert np.array_equal(without_end_objects(other, xyz, t, [0], params), other)
+    # Returns where the track was heading stay, however few: the drone seen again along
+    # its path 2.6 s on, too late for the kinematic tracker to continue its track.
+    t_on = np.array([8.5, 8.5, 8.6])
+    on = np.stack([8.0 * t_on, -6.0 * t_on, np.full_like(t_on, 10.0)], 1)
+    xyz_on, t_all = np.concatenate([drone, on]), np.concatenate([t_drone, t_on])
+    kept = np.zeros(t_all.size, dtype=np.int64)
+    assert np.array_equal(without_end_objects(kept, xyz_on, t_all, [0], params), kept)
 
 
 def _two_overlapping_positions(
