@@ -1661,6 +1661,17 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "the frames it fills are released only after a live report).",
     ),
     ParamSpec(
+        "stream_segment_contact",
+        "bool",
+        True,
+        "Streaming: the chosen track's segments (its returns cut where more than max_gap "
+        "apart) with more than hover_max_contact of their returns in or next to "
+        "suppressed static structure are left out of it, unless all are: the swaying edge "
+        "of a tree crown, which the clusterer linked to a drone's cluster 1.75 s after the "
+        "drone's returns stopped, was reported for 2.3 s (deviation 143); false = the "
+        "whole cluster is the track.",
+    ),
+    ParamSpec(
         "reacquire_compete",
         "bool",
         True,

@@ -1699,6 +1699,8 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
         mask: np.ndarray | None, confidence: float, new: bool, k: int, coast: bool = False
     ) -> _TrackChoice:
         reported = snap.track_path if p.stream_track_agree else None
+        if mask is not None and p.stream_segment_contact:
+            mask = _off_structure_segments(mask, xyz, t, structure, p)
         samples = None if mask is None else _track_samples(mask, xyz, t, p, reported)
         head: tuple[_TrackSample, ...] = ()
         tail: tuple[_TrackSample, ...] = ()
@@ -2096,6 +2098,41 @@ def _grown(
         return ()
     samples = _track_samples(new, xyz[sub], t[sub], params)
     return tuple(s for s in samples if (s.t > edge if forward else s.t < edge))
+
+
+def _off_structure_segments(
+    mask: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    structure: np.ndarray | None,
+    params: ParamSet,
+) -> np.ndarray:
+    """stream_segment_contact (deviation 143): ``mask`` without its segments (its returns
+    cut where they are more than ``max_gap`` apart) of which more than
+    ``hover_max_contact`` lie in or next to a voxel of the sorted static ``structure``
+    keys (:func:`structure_contact`), unless that is all of them: a swaying crown's
+    edge the clusterer linked to a drone's cluster after the drone's returns stopped."""
+    limit = float(params.hover_max_contact)
+    if limit >= 1.0 or structure is None or structure.size == 0 or not mask.any():
+        return mask
+    idx = np.flatnonzero(mask)
+    idx = idx[np.argsort(t[idx], kind="stable")]
+    cuts = np.flatnonzero(np.diff(t[idx]) > params.max_gap) + 1
+    if cuts.size == 0:
+        return mask
+    segment = np.zeros(idx.size, dtype=np.int64)
+    segment[cuts] = 1
+    segment = np.cumsum(segment)
+    k = int(segment[-1]) + 1
+    share = structure_contact(
+        segment, xyz[idx].astype(np.float64), k, np.ones(k, bool), structure, params.static_voxel
+    )
+    touching = share > limit
+    if not touching.any() or touching.all():
+        return mask
+    out = mask.copy()
+    out[idx[touching[segment]]] = False
+    return out
 
 
 def _short_of_structure(

@@ -20,6 +20,7 @@ from clusterfilter_ros.core.streaming import (
     _joined_track,
     _kept_over,
     _off_reported,
+    _off_structure_segments,
     _split_track,
     _track_cluster,
     _track_samples,
@@ -846,6 +847,35 @@ def test_a_sparse_track_resumes_from_its_newest_returns_behind_its_prediction():
     before = [(e.stamp, tuple(e.position)) for e in resumed if e.stamp - 1000.0 < 10.0]
     assert before == [(e.stamp, tuple(e.position)) for e in lost if e.stamp - 1000.0 < 10.0]
     assert before
+
+
+def test_a_crowns_edge_linked_after_the_drone_is_left_out_of_the_track():
+    # Deviation 143 (`default` 7000 of the sixty-ninth set): 1.75 s after the drone's
+    # returns stopped, a few returns of a swaying crown's edge (the rest of the crown
+    # static) were linked to its cluster, and the live output reported the crown.
+    p = detector_params()
+    t_drone = np.repeat(np.arange(0.0, 6.0, 0.1), 2)
+    drone = np.stack([12.0 - 0.5 * t_drone, 3.0 + 0.3 * t_drone, np.full_like(t_drone, 9.0)], 1)
+    t_edge = np.arange(7.8, 8.6, 0.1)
+    edge = np.tile([5.9, 1.5, 5.4], (t_edge.size, 1))
+    xyz = np.concatenate([drone, edge]).astype(np.float32)
+    t = np.concatenate([t_drone, t_edge])
+    mask = np.ones(t.size, dtype=bool)
+    # The crown's static voxels, one voxel beside its edge's returns.
+    crown = np.array([[5.9 + p.static_voxel, 1.5, 5.4], [5.9, 1.5, 5.4 - p.static_voxel]])
+    static = np.unique(voxel.voxel_keys(crown, p.static_voxel))
+    out = _off_structure_segments(mask, xyz, t, static, p)
+    assert np.array_equal(out, t < 7.0)
+    # Unchanged: without structure, with the edge's returns within max_gap of the
+    # drone's (one segment), when every segment touches structure (a hover beside a
+    # tree is judged by the hover scoring), and with hover_max_contact 1.
+    assert _off_structure_segments(mask, xyz, t, None, p) is mask
+    close = np.where(t > 7.0, t - 1.7, t)
+    assert _off_structure_segments(mask, xyz, close, static, p) is mask
+    apart = np.where(t > 8.15, t + 2.0, t)  # the edge seen in two segments
+    only_edge = t > 7.0
+    assert _off_structure_segments(only_edge, xyz, apart, static, p) is only_edge
+    assert _off_structure_segments(mask, xyz, t, static, p.copy(hover_max_contact=1.0)) is mask
 
 
 class _Scores:
