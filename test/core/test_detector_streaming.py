@@ -850,9 +850,10 @@ def test_a_sparse_track_resumes_from_its_newest_returns_behind_its_prediction():
 
 
 def test_a_crowns_edge_linked_after_the_drone_is_left_out_of_the_track():
-    # Deviation 143 (`default` 7000 of the sixty-ninth set): 1.75 s after the drone's
-    # returns stopped, a few returns of a swaying crown's edge (the rest of the crown
-    # static) were linked to its cluster, and the live output reported the crown.
+    # Deviation 143 (`default` 7000 of the sixty-ninth set; stream_segment_contact, off
+    # by default): 1.75 s after the drone's returns stopped, a few returns of a swaying
+    # crown's edge (the rest of the crown static) were linked to its cluster, and the
+    # live output reported the crown.
     p = detector_params()
     t_drone = np.repeat(np.arange(0.0, 6.0, 0.1), 2)
     drone = np.stack([12.0 - 0.5 * t_drone, 3.0 + 0.3 * t_drone, np.full_like(t_drone, 9.0)], 1)
