@@ -1670,8 +1670,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "of a tree crown, which the clusterer linked to a drone's cluster 1.75 s after the "
         "drone's returns stopped, was reported for 2.3 s (deviation 143); false = the "
         "whole cluster is the track. Off: a hovering drone's own voxels turn static, and "
-        "on the first 514 streaming runs it cut a hover's segments (birds 5901 late 58.5 "
-        "-> 31.8%) and a take-off's (take-off 2500 live 65.9 -> 57.0%).",
+        "on the first 514 streaming runs it cut hovering segments (birds 5901 late 58.5 "
+        "-> 31.8%; take-off 2500 live 65.9 -> 57.0%, its hover 7.6 m up).",
     ),
     ParamSpec(
         "reacquire_compete",
