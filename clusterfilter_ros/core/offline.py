@@ -263,6 +263,8 @@ def select_trimmed(
     (deviation 121): a bird's leg 40 m from the drone's pass, which began before it.
     With ``apart_segments`` that is judged per segment of the candidate, and only what
     is elsewhere is left out, trimmed (:func:`_apart_from`, deviation 141).
+    With ``end_overlap_support`` a candidate that outnumbers the end of a selected track
+    in its own time takes that time (:func:`_outnumbered_end`, deviation 145).
     Returns (labels with the trimmed points set to -1, selected clusters best first,
     mask of the trimmed points).
     """
@@ -275,12 +277,15 @@ def select_trimmed(
     labels = labels.copy()
     chosen = list(selected)
     gap = float(params.link_max_gap)
-    spans = []
-    for c in chosen:
+
+    def whole_spans(c: int) -> list[tuple[float, float]]:
         tc = t[labels == c]
-        spans += occupied_spans(tc[(tc >= scores.t_first[c]) & (tc <= scores.t_last[c])], gap)
+        return occupied_spans(tc[(tc >= scores.t_first[c]) & (tc <= scores.t_last[c])], gap)
+
+    spans_of = {c: whole_spans(c) for c in chosen}
     # Candidates are judged against the tracks selected whole (the rests added here rank
-    # lower); the loop below relabels only candidates' points, so these stay as they are.
+    # lower); the loop below relabels only candidates' points, so these stay as they are
+    # (but for the ends that end_overlap_support hands over).
     whole = [np.nonzero(labels == j)[0] for j in selected] if xyz is not None else []
     order = np.argsort(-rank, kind="stable")
     for c in order[qualifies[order]]:
@@ -292,8 +297,17 @@ def select_trimmed(
         if apart.all():
             continue
         elsewhere, member = member[apart], member[~apart]
+        if params.end_overlap_support and member.size:
+            for j, s in enumerate(selected):
+                end = _outnumbered_end(labels, t, scores, s, c, member)
+                if end is not None:
+                    labels[end] = -1
+                    trimmed[end] = True
+                    spans_of[s] = whole_spans(s)
+                    if whole:
+                        whole[j] = np.nonzero(labels == s)[0]
         covered = np.zeros(member.size, dtype=bool)
-        for first, last in spans:
+        for first, last in (span for spans in spans_of.values() for span in spans):
             covered |= (t[member] >= first) & (t[member] <= last)
         rest = member[~covered]
         need = params.min_track_seconds
@@ -306,8 +320,42 @@ def select_trimmed(
         labels[elsewhere] = -1
         trimmed[elsewhere] = True
         chosen.append(c)
-        spans += occupied_spans(t[rest], gap)
+        spans_of[c] = occupied_spans(t[rest], gap)
     return labels, chosen, trimmed
+
+
+#: A candidate takes over the end of a selected track it overlaps (``end_overlap_support``)
+#: when it holds at least this many times the track's returns in that time.
+OUTNUMBER = 3.0
+
+
+def _outnumbered_end(
+    labels: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    track: int,
+    candidate: int,
+    member: np.ndarray,
+) -> np.ndarray | None:
+    """``end_overlap_support`` (deviation 145): the returns of the selected ``track``
+    within the time span of ``candidate`` (its points ``member``), when they are one end
+    of the track (none of its returns after the candidate's last, or none before its
+    first, but not both), the candidate is at least as confident and holds at least
+    :data:`OUTNUMBER` times as many returns in that span: one drone at a time, and the
+    track's end there is something else the clusterer joined to it (a bird that flew on
+    beside the drone as the drone's own returns formed the candidate). None otherwise."""
+    tt = t[member]
+    lo, hi = float(tt.min()), float(tt.max())
+    own = np.flatnonzero(labels == track)
+    if own.size == 0 or scores.confidence[candidate] < scores.confidence[track]:
+        return None
+    ts = t[own]
+    inside = (ts >= lo) & (ts <= hi)
+    n_in = int(np.count_nonzero(inside))
+    tail, head = not (ts > hi).any(), not (ts < lo).any()
+    if n_in == 0 or tail == head or member.size < OUTNUMBER * n_in:
+        return None
+    return own[inside]
 
 
 #: Two tracks seen at the same moments, never closer than this (m), are two objects

@@ -1262,6 +1262,28 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "false = the whole cluster is the track.",
     ),
     ParamSpec(
+        "end_overlap_support",
+        "bool",
+        True,
+        "Offline: a qualifying candidate that overlaps one end of a selected track in time "
+        "(the track has no returns after the candidate's last, or none before its first), "
+        "at least as confident and with at least three times the track's returns in its "
+        "time span, takes that time: the track's returns there are trimmed (a bird that "
+        "flew on beside the drone joined the drone's track while the drone's own returns "
+        "formed the candidate, deviation 145); false = the candidate keeps only its time "
+        "outside the track.",
+    ),
+    ParamSpec(
+        "coherence_per_window",
+        "bool",
+        False,
+        "Motion coherence weighs every coherence_window once (the cluster centroid is the "
+        "mean of its window centroids, distances are averaged per window) instead of every "
+        "return: a drone passing over the rig left most of its returns in its closest "
+        "second and looked static (coherence 0.42, deviation 144); false = weighted by "
+        "returns.",
+    ),
+    ParamSpec(
         "stream_min_track_seconds",
         "float",
         0.0,

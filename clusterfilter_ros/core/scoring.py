@@ -348,7 +348,13 @@ def score_clusters(
             0.0,
         )
         res.coherence = motion_coherence(
-            lab, pts, tt, k, float(params.coherence_window), coherence_origin
+            lab,
+            pts,
+            tt,
+            k,
+            float(params.coherence_window),
+            coherence_origin,
+            per_window=bool(params.coherence_per_window),
         )
         lo = min(float(params.coherence_floor), float(params.min_coherence) - 1e-6)
         coherent = np.clip((res.coherence - lo) / (float(params.min_coherence) - lo), 0.0, 1.0)
@@ -505,6 +511,7 @@ def motion_coherence(
     k: int,
     window: float,
     origin: float | None = None,
+    per_window: bool = False,
 ) -> np.ndarray:
     """1 - (mean distance to the window centroid) / (mean distance to the cluster centroid).
 
@@ -513,6 +520,13 @@ def motion_coherence(
     centroid of their own time window and far from the overall centroid (coherence near
     1); a static object's windows all sample the same place (near 0). Clusters seen in
     a single window get 0: no evidence of motion.
+
+    With ``per_window`` (deviation 144) every window counts once: the cluster centroid
+    is the mean of its window centroids, and the distances are averaged per window
+    before the windows are averaged. A drone passing over the rig leaves most of its
+    returns in the one second it is closest; weighted by returns, that second's spread
+    (the drone's own motion in it) is compared with distances to a centroid sitting in
+    it, and the pass looked static (coherence 0.42).
     """
     out = np.zeros(k)
     if lab.size == 0:
@@ -525,10 +539,22 @@ def motion_coherence(
     win = np.floor((t - (t.min() if origin is None else origin)) / window).astype(np.int64)
     win -= win.min()
     cw_owner, cw_inv, cw_n, cw_c = bin_means(lab, win, pts)
+    if per_window:
+        n_win = np.bincount(cw_owner, minlength=k).astype(np.float64)
+        centroid = (
+            np.stack(
+                [np.bincount(cw_owner, weights=cw_c[:, a], minlength=k) for a in range(3)], axis=1
+            )
+            / np.maximum(n_win, 1.0)[:, None]
+        )
     # Only windows with >= 2 points say anything about scatter within a window.
     multi = cw_n[cw_inv] >= 2
     local = np.linalg.norm(pts - cw_c[cw_inv], axis=1)
     overall = np.linalg.norm(pts - centroid[lab], axis=1)
+    if per_window:
+        # Each point weighs 1 / (points in its window): every window counts once.
+        w = 1.0 / cw_n[cw_inv]
+        local, overall = local * w, overall * w
     local_sum = np.bincount(lab[multi], weights=local[multi], minlength=k)
     overall_sum = np.bincount(lab[multi], weights=overall[multi], minlength=k)
     multi_windows = np.bincount(cw_owner[cw_n >= 2], minlength=k)

@@ -206,6 +206,45 @@ def test_a_candidate_is_judged_elsewhere_segment_by_segment():
     assert chosen == [1]
 
 
+def _outnumbered_tail(tail_end: float = 14.0):
+    """A selected track (cluster 1) dense over 0-10 s, then a sparse tail every 0.5 s to
+    ``tail_end``; a candidate (cluster 0) beside it, 10 returns a second over 10-14.5 s,
+    more confident."""
+    t1 = np.concatenate([np.arange(0.0, 10.0, 0.1), np.arange(10.0, tail_end, 0.5)])
+    t0 = np.arange(10.0, 14.5, 0.1)
+    t = np.concatenate([t1, t0])
+    labels = np.repeat([1, 0], [t1.size, t0.size])
+    xyz = np.stack([2.0 * t, 3.0 * labels, np.full_like(t, 20.0)], 1).astype(np.float32)
+    params = detector_params()
+    scores = score_clusters(labels, xyz, t, params, n_clusters=2)
+    scores = dataclasses.replace(
+        scores, candidate=np.array([True, True]), confidence=np.array([0.9, 0.7])
+    )
+    return labels, t, xyz, scores, params
+
+
+def test_a_more_confident_candidate_takes_over_the_sparse_end_of_a_track():
+    # Deviation 145 (birds 7101 of the seventieth set): a bird flew on beside the drone
+    # and the clusterer joined it to the drone's long sparse track, while the drone's
+    # own returns there formed a better candidate, trimmed to 0.7 s outside the track.
+    labels, t, xyz, scores, on = _outnumbered_tail()
+    off = on.copy(end_overlap_support=False)
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], off, xyz=xyz)
+    assert chosen == [1]  # the candidate's 9 returns after the track's span are too few
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], on, xyz=xyz)
+    assert chosen == [1, 0]
+    assert np.array_equal(trimmed, (labels == 1) & (t >= 10.0))
+    assert np.array_equal(out[labels == 0], labels[labels == 0])
+    # A less confident candidate leaves the track as it is.
+    weaker = dataclasses.replace(scores, confidence=np.array([0.65, 0.7]))
+    _, chosen, trimmed = select_trimmed(labels, t, weaker, [1], on, xyz=xyz)
+    assert chosen == [1] and not trimmed.any()
+    # So does one inside the track's time (its returns on both sides): no end of it.
+    labels, t, xyz, scores, _ = _outnumbered_tail(tail_end=16.0)
+    _, chosen, trimmed = select_trimmed(labels, t, scores, [1], on, xyz=xyz)
+    assert chosen == [1] and not trimmed.any()
+
+
 def test_another_object_joined_at_a_tracks_end_is_left_to_growth():
     # Deviation 142 (fast_pass 6802 of the sixty-seventh set): a bird flying past the
     # leaving drone was linked to the end of its cluster; the track turned and followed
