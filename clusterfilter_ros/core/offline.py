@@ -278,8 +278,8 @@ def select_trimmed(
     chosen = list(selected)
     gap = float(params.link_max_gap)
 
-    def whole_spans(c: int) -> list[tuple[float, float]]:
-        tc = t[labels == c]
+    def whole_spans(c: int, points: np.ndarray | None = None) -> list[tuple[float, float]]:
+        tc = t[labels == c] if points is None else t[points]
         return occupied_spans(tc[(tc >= scores.t_first[c]) & (tc <= scores.t_last[c])], gap)
 
     spans_of = {c: whole_spans(c) for c in chosen}
@@ -297,17 +297,21 @@ def select_trimmed(
         if apart.all():
             continue
         elsewhere, member = member[apart], member[~apart]
+        # Deviation 145: the ends of selected tracks this candidate outnumbers, handed
+        # over only if the candidate is then taken.
+        handed = {}
         if params.end_overlap_support and member.size:
             for j, s in enumerate(selected):
                 end = _outnumbered_end(labels, t, scores, s, c, member)
                 if end is not None:
-                    labels[end] = -1
-                    trimmed[end] = True
-                    spans_of[s] = whole_spans(s)
-                    if whole:
-                        whole[j] = np.nonzero(labels == s)[0]
+                    handed[j] = end
+        spans_now = dict(spans_of)
+        for j, end in handed.items():
+            s = selected[j]
+            keep = np.setdiff1d(np.flatnonzero(labels == s), end, assume_unique=True)
+            spans_now[s] = whole_spans(s, keep)
         covered = np.zeros(member.size, dtype=bool)
-        for first, last in (span for spans in spans_of.values() for span in spans):
+        for first, last in (span for spans in spans_now.values() for span in spans):
             covered |= (t[member] >= first) & (t[member] <= last)
         rest = member[~covered]
         need = params.min_track_seconds
@@ -315,6 +319,12 @@ def select_trimmed(
             need = min(need, params.split_rest_seconds)  # deviation 79
         if rest.size < params.min_cluster_points or np.ptp(t[rest]) < need:
             continue
+        for j, end in handed.items():
+            labels[end] = -1
+            trimmed[end] = True
+            if whole:
+                whole[j] = np.nonzero(labels == selected[j])[0]
+        spans_of = spans_now
         labels[member[covered]] = -1
         trimmed[member[covered]] = True
         labels[elsewhere] = -1

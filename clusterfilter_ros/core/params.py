@@ -1683,6 +1683,14 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "the frames it fills are released only after a live report).",
     ),
     ParamSpec(
+        "stream_segment_own",
+        "bool",
+        True,
+        "stream_segment_contact: a segment whose centre lies within hover_max_extent of a "
+        "sample of the reported track is the track's own and kept, whatever it touches "
+        "(a hovering drone's voxels turn static; deviation 146); false = contact alone.",
+    ),
+    ParamSpec(
         "stream_segment_contact",
         "bool",
         False,

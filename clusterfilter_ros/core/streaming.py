@@ -1700,7 +1700,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     ) -> _TrackChoice:
         reported = snap.track_path if p.stream_track_agree else None
         if mask is not None and p.stream_segment_contact:
-            mask = _off_structure_segments(mask, xyz, t, structure, p)
+            mask = _off_structure_segments(mask, xyz, t, structure, p, snap.track_path)
         samples = None if mask is None else _track_samples(mask, xyz, t, p, reported)
         head: tuple[_TrackSample, ...] = ()
         tail: tuple[_TrackSample, ...] = ()
@@ -2106,12 +2106,16 @@ def _off_structure_segments(
     t: np.ndarray,
     structure: np.ndarray | None,
     params: ParamSet,
+    path: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """stream_segment_contact (deviation 143): ``mask`` without its segments (its returns
     cut where they are more than ``max_gap`` apart) of which more than
     ``hover_max_contact`` lie in or next to a voxel of the sorted static ``structure``
     keys (:func:`structure_contact`), unless that is all of them: a swaying crown's
-    edge the clusterer linked to a drone's cluster after the drone's returns stopped."""
+    edge the clusterer linked to a drone's cluster after the drone's returns stopped.
+    With ``stream_segment_own`` and ``path`` (the reported track's sample times and
+    positions), a segment whose centre lies within ``hover_max_extent`` of one of the
+    track's samples is kept: a hover's own voxels turn static (deviation 146)."""
     limit = float(params.hover_max_contact)
     if limit >= 1.0 or structure is None or structure.size == 0 or not mask.any():
         return mask
@@ -2128,6 +2132,18 @@ def _off_structure_segments(
         segment, xyz[idx].astype(np.float64), k, np.ones(k, bool), structure, params.static_voxel
     )
     touching = share > limit
+    if touching.any() and path is not None and path[1].size and params.stream_segment_own:
+        # A hover's own voxels turn static: a segment where the reported track has been
+        # is the track's, whatever it touches (deviation 146). The rule keeps what the
+        # track had not reached out of it; it does not take back what it reported.
+        centre = (
+            np.stack(
+                [np.bincount(segment, weights=xyz[idx][:, a], minlength=k) for a in range(3)], 1
+            )
+            / np.bincount(segment, minlength=k)[:, None]
+        )
+        d = np.linalg.norm(centre[:, None, :] - path[1][None, :, :], axis=2).min(axis=1)
+        touching &= d > float(params.hover_max_extent)
     if not touching.any() or touching.all():
         return mask
     out = mask.copy()

@@ -206,12 +206,12 @@ def test_a_candidate_is_judged_elsewhere_segment_by_segment():
     assert chosen == [1]
 
 
-def _outnumbered_tail(tail_end: float = 14.0):
+def _outnumbered_tail(tail_end: float = 14.0, candidate_end: float = 14.5):
     """A selected track (cluster 1) dense over 0-10 s, then a sparse tail every 0.5 s to
-    ``tail_end``; a candidate (cluster 0) beside it, 10 returns a second over 10-14.5 s,
-    more confident."""
+    ``tail_end``; a candidate (cluster 0) beside it, 10 returns a second from 10 s to
+    ``candidate_end``, more confident."""
     t1 = np.concatenate([np.arange(0.0, 10.0, 0.1), np.arange(10.0, tail_end, 0.5)])
-    t0 = np.arange(10.0, 14.5, 0.1)
+    t0 = np.arange(10.0, candidate_end, 0.1)
     t = np.concatenate([t1, t0])
     labels = np.repeat([1, 0], [t1.size, t0.size])
     xyz = np.stack([2.0 * t, 3.0 * labels, np.full_like(t, 20.0)], 1).astype(np.float32)
@@ -243,6 +243,10 @@ def test_a_more_confident_candidate_takes_over_the_sparse_end_of_a_track():
     labels, t, xyz, scores, _ = _outnumbered_tail(tail_end=16.0)
     _, chosen, trimmed = select_trimmed(labels, t, scores, [1], on, xyz=xyz)
     assert chosen == [1] and not trimmed.any()
+    # Nor is the end handed over to a candidate too short to be taken then (2.9 s).
+    labels, t, xyz, scores, _ = _outnumbered_tail(tail_end=13.0, candidate_end=13.0)
+    out, chosen, trimmed = select_trimmed(labels, t, scores, [1], on, xyz=xyz)
+    assert chosen == [1] and not trimmed.any() and np.array_equal(out, labels)
 
 
 def test_another_object_joined_at_a_tracks_end_is_left_to_growth():

@@ -877,6 +877,15 @@ def test_a_crowns_edge_linked_after_the_drone_is_left_out_of_the_track():
     only_edge = t > 7.0
     assert _off_structure_segments(only_edge, xyz, apart, static, p) is only_edge
     assert _off_structure_segments(mask, xyz, t, static, p.copy(hover_max_contact=1.0)) is mask
+    # Deviation 146: where the reported track has been (a hover whose own voxels turned
+    # static), the segment is the track's and stays; with the switch off it goes.
+    drone_path = (t_drone[::2], drone[::2].astype(np.float64))
+    by_edge = (np.array([7.0]), np.array([[6.5, 2.0, 6.0]]))
+    assert _off_structure_segments(mask, xyz, t, static, p, drone_path).sum() < mask.sum()
+    assert _off_structure_segments(mask, xyz, t, static, p, by_edge) is mask
+    blind = p.copy(stream_segment_own=False)
+    out = _off_structure_segments(mask, xyz, t, static, blind, by_edge)
+    assert np.array_equal(out, t < 7.0)
 
 
 class _Scores:
