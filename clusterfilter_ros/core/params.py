@@ -1688,7 +1688,8 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         True,
         "stream_segment_contact: a segment whose centre lies within hover_max_extent of a "
         "sample of the reported track is the track's own and kept, whatever it touches "
-        "(a hovering drone's voxels turn static; deviation 146); false = contact alone.",
+        "(a hovering drone's voxels turn static; deviation 146); false = contact alone. "
+        "Acts only with stream_segment_contact, which is off.",
     ),
     ParamSpec(
         "stream_segment_contact",
@@ -1701,7 +1702,9 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "drone's returns stopped, was reported for 2.3 s (deviation 143); false = the "
         "whole cluster is the track. Off: a hovering drone's own voxels turn static, and "
         "on the first 514 streaming runs it cut hovering segments (birds 5901 late 58.5 "
-        "-> 31.8%; take-off 2500 live 65.9 -> 57.0%, its hover 7.6 m up).",
+        "-> 31.8%; take-off 2500 live 65.9 -> 57.0%, its hover 7.6 m up); with "
+        "stream_segment_own the hovers are kept, but near birds a few of the drone's own "
+        "returns are still cut (birds 5002 live 32.3 -> 28.6%).",
     ),
     ParamSpec(
         "reacquire_compete",
