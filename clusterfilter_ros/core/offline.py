@@ -278,15 +278,16 @@ def select_trimmed(
     chosen = list(selected)
     gap = float(params.link_max_gap)
 
-    def whole_spans(c: int, points: np.ndarray | None = None) -> list[tuple[float, float]]:
-        tc = t[labels == c] if points is None else t[points]
+    # The points of the tracks selected whole. Candidates are judged against these (the
+    # rests added here rank lower); the loop below relabels only candidates' points, so
+    # these stay as they are (but for the ends that end_overlap_support hands over).
+    whole = [np.flatnonzero(labels == j) for j in selected]
+
+    def whole_spans(c: int, points: np.ndarray) -> list[tuple[float, float]]:
+        tc = t[points]
         return occupied_spans(tc[(tc >= scores.t_first[c]) & (tc <= scores.t_last[c])], gap)
 
-    spans_of = {c: whole_spans(c) for c in chosen}
-    # Candidates are judged against the tracks selected whole (the rests added here rank
-    # lower); the loop below relabels only candidates' points, so these stay as they are
-    # (but for the ends that end_overlap_support hands over).
-    whole = [np.nonzero(labels == j)[0] for j in selected] if xyz is not None else []
+    spans_of = {c: whole_spans(c, points) for c, points in zip(selected, whole, strict=True)}
     order = np.argsort(-rank, kind="stable")
     for c in order[qualifies[order]]:
         c = int(c)
@@ -297,19 +298,17 @@ def select_trimmed(
         if apart.all():
             continue
         elsewhere, member = member[apart], member[~apart]
-        # Deviation 145: the ends of selected tracks this candidate outnumbers, handed
-        # over only if the candidate is then taken.
-        handed = {}
+        # Deviation 145: what is left of the selected tracks whose ends this candidate
+        # outnumbers, handed over only if the candidate is then taken.
+        kept = {}
         if params.end_overlap_support and member.size:
             for j, s in enumerate(selected):
-                end = _outnumbered_end(labels, t, scores, s, c, member)
+                end = _outnumbered_end(whole[j], t, scores, s, c, member)
                 if end is not None:
-                    handed[j] = end
+                    kept[j] = whole[j][~end]
         spans_now = dict(spans_of)
-        for j, end in handed.items():
-            s = selected[j]
-            keep = np.setdiff1d(np.flatnonzero(labels == s), end, assume_unique=True)
-            spans_now[s] = whole_spans(s, keep)
+        for j, points in kept.items():
+            spans_now[selected[j]] = whole_spans(selected[j], points)
         covered = np.zeros(member.size, dtype=bool)
         for first, last in (span for spans in spans_now.values() for span in spans):
             covered |= (t[member] >= first) & (t[member] <= last)
@@ -319,11 +318,11 @@ def select_trimmed(
             need = min(need, params.split_rest_seconds)  # deviation 79
         if rest.size < params.min_cluster_points or np.ptp(t[rest]) < need:
             continue
-        for j, end in handed.items():
+        for j, points in kept.items():
+            end = np.setdiff1d(whole[j], points, assume_unique=True)
             labels[end] = -1
             trimmed[end] = True
-            if whole:
-                whole[j] = np.nonzero(labels == selected[j])[0]
+            whole[j] = points
         spans_of = spans_now
         labels[member[covered]] = -1
         trimmed[member[covered]] = True
@@ -340,15 +339,16 @@ OUTNUMBER = 3.0
 
 
 def _outnumbered_end(
-    labels: np.ndarray,
+    own: np.ndarray,
     t: np.ndarray,
     scores: ClusterScores,
     track: int,
     candidate: int,
     member: np.ndarray,
 ) -> np.ndarray | None:
-    """``end_overlap_support`` (deviation 145): the returns of the selected ``track``
-    within the time span of ``candidate`` (its points ``member``), when they are one end
+    """``end_overlap_support`` (deviation 145): mask over ``own`` (the points of the
+    selected ``track``) of its returns within the time span of ``candidate`` (its
+    points ``member``), when they are one end
     of the track (none of its returns after the candidate's last, or none before its
     first, but not both), the candidate is at least as confident and holds at least
     :data:`OUTNUMBER` times as many returns in that span: one drone at a time, and the
@@ -356,7 +356,6 @@ def _outnumbered_end(
     beside the drone as the drone's own returns formed the candidate). None otherwise."""
     tt = t[member]
     lo, hi = float(tt.min()), float(tt.max())
-    own = np.flatnonzero(labels == track)
     if own.size == 0 or scores.confidence[candidate] < scores.confidence[track]:
         return None
     ts = t[own]
@@ -365,7 +364,7 @@ def _outnumbered_end(
     tail, head = not (ts > hi).any(), not (ts < lo).any()
     if n_in == 0 or tail == head or member.size < OUTNUMBER * n_in:
         return None
-    return own[inside]
+    return inside
 
 
 #: Two tracks seen at the same moments, never closer than this (m), are two objects
@@ -432,11 +431,9 @@ def _apart_from(
     apart = np.zeros(member.size, dtype=bool)
     if xyz is None or not tracks or member.size == 0:
         return apart
-    order = np.argsort(t[member], kind="stable")
-    pieces = [order]
+    pieces = [np.arange(member.size)]
     if params.apart_segments:
-        cuts = np.flatnonzero(np.diff(t[member][order]) > params.max_gap) + 1
-        pieces = np.split(order, cuts)
+        pieces = gap_runs(t[member], params.max_gap)
     for piece in pieces:
         if any(_elsewhere(member[piece], track, xyz, t, params) for track in tracks):
             apart[piece] = True
@@ -476,15 +473,21 @@ def _elsewhere(
     return bool(np.linalg.norm(pa[moments] - pb[near[moments]], axis=1).min() > APART_OBJECTS)
 
 
-def occupied_spans(t: np.ndarray, max_gap: float) -> list[tuple[float, float]]:
-    """(first, last) stamp of each run of the stamps ``t`` with no gap over ``max_gap``."""
-    t = np.sort(np.asarray(t, dtype=np.float64).reshape(-1))
+def gap_runs(t: np.ndarray, max_gap: float) -> list[np.ndarray]:
+    """Indices into the stamps ``t``, in time order (stable), one array per run with no
+    gap over ``max_gap`` between consecutive stamps (the segments a trajectory is cut
+    into); [] for no stamps."""
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
     if t.size == 0:
         return []
-    cut = np.flatnonzero(np.diff(t) > max_gap)
-    starts = np.concatenate([[0], cut + 1])
-    ends = np.concatenate([cut, [t.size - 1]])
-    return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends, strict=True)]
+    order = np.argsort(t, kind="stable")
+    return np.split(order, np.flatnonzero(np.diff(t[order]) > max_gap) + 1)
+
+
+def occupied_spans(t: np.ndarray, max_gap: float) -> list[tuple[float, float]]:
+    """(first, last) stamp of each run of the stamps ``t`` with no gap over ``max_gap``."""
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    return [(float(t[run[0]]), float(t[run[-1]])) for run in gap_runs(t, max_gap)]
 
 
 #: Seconds at each end of a selected cluster averaged for its end positions...

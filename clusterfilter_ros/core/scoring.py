@@ -531,22 +531,16 @@ def motion_coherence(
     out = np.zeros(k)
     if lab.size == 0:
         return out
-    counts = np.bincount(lab, minlength=k).astype(np.float64)
-    centroid = (
-        np.stack([np.bincount(lab, weights=pts[:, a], minlength=k) for a in range(3)], axis=1)
-        / np.maximum(counts, 1.0)[:, None]
-    )
     win = np.floor((t - (t.min() if origin is None else origin)) / window).astype(np.int64)
     win -= win.min()
     cw_owner, cw_inv, cw_n, cw_c = bin_means(lab, win, pts)
-    if per_window:
-        n_win = np.bincount(cw_owner, minlength=k).astype(np.float64)
-        centroid = (
-            np.stack(
-                [np.bincount(cw_owner, weights=cw_c[:, a], minlength=k) for a in range(3)], axis=1
-            )
-            / np.maximum(n_win, 1.0)[:, None]
-        )
+    # The cluster centroid: the mean of its returns, or of its window centroids.
+    ids, values = (cw_owner, cw_c) if per_window else (lab, pts)
+    counts = np.bincount(ids, minlength=k).astype(np.float64)
+    centroid = (
+        np.stack([np.bincount(ids, weights=values[:, a], minlength=k) for a in range(3)], axis=1)
+        / np.maximum(counts, 1.0)[:, None]
+    )
     # Only windows with >= 2 points say anything about scatter within a window.
     multi = cw_n[cw_inv] >= 2
     local = np.linalg.norm(pts - cw_c[cw_inv], axis=1)

@@ -64,7 +64,7 @@ from clusterfilter_ros.core.clustering import absorb_colocated_noise
 from clusterfilter_ros.core.estimate import Estimate, reported_positions
 from clusterfilter_ros.core.frame import MID360, Frame
 from clusterfilter_ros.core.linking import extend_track, fill_track
-from clusterfilter_ros.core.offline import global_clusters, transient_below_floor
+from clusterfilter_ros.core.offline import gap_runs, global_clusters, transient_below_floor
 from clusterfilter_ros.core.params import ParamSet, detector_params
 from clusterfilter_ros.core.preprocess import frame_points, points_at, usable_and_below_floor
 from clusterfilter_ros.core.scoring import (
@@ -2120,28 +2120,21 @@ def _off_structure_segments(
     if limit >= 1.0 or structure is None or structure.size == 0 or not mask.any():
         return mask
     idx = np.flatnonzero(mask)
-    idx = idx[np.argsort(t[idx], kind="stable")]
-    cuts = np.flatnonzero(np.diff(t[idx]) > params.max_gap) + 1
-    if cuts.size == 0:
+    runs = gap_runs(t[idx], params.max_gap)
+    if len(runs) < 2:
         return mask
-    segment = np.zeros(idx.size, dtype=np.int64)
-    segment[cuts] = 1
-    segment = np.cumsum(segment)
-    k = int(segment[-1]) + 1
-    share = structure_contact(
-        segment, xyz[idx].astype(np.float64), k, np.ones(k, bool), structure, params.static_voxel
-    )
+    k = len(runs)
+    idx = idx[np.concatenate(runs)]
+    sizes = np.array([run.size for run in runs])
+    segment = np.repeat(np.arange(k), sizes)
+    pts = xyz[idx].astype(np.float64)
+    share = structure_contact(segment, pts, k, np.ones(k, bool), structure, params.static_voxel)
     touching = share > limit
     if touching.any() and path is not None and path[1].size and params.stream_segment_own:
         # A hover's own voxels turn static: a segment where the reported track has been
         # is the track's, whatever it touches (deviation 146). The rule keeps what the
         # track had not reached out of it; it does not take back what it reported.
-        centre = (
-            np.stack(
-                [np.bincount(segment, weights=xyz[idx][:, a], minlength=k) for a in range(3)], 1
-            )
-            / np.bincount(segment, minlength=k)[:, None]
-        )
+        centre = np.add.reduceat(pts, np.r_[0, np.cumsum(sizes)[:-1]], axis=0) / sizes[:, None]
         d = np.linalg.norm(centre[:, None, :] - path[1][None, :, :], axis=2).min(axis=1)
         touching &= d > float(params.hover_max_extent)
     if not touching.any() or touching.all():
