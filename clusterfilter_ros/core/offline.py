@@ -685,6 +685,74 @@ def _carries_on(before: _PieceEnds, after: _PieceEnds, params: ParamSet) -> bool
     return True
 
 
+def _split_pool(
+    labels: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    was_split: np.ndarray,
+    params: ParamSet,
+) -> np.ndarray:
+    """(K,) bool: the clusters :func:`bridging_pieces` and :func:`end_pieces` may chain:
+    made only of split points (``was_split``), unselected, with at least
+    :data:`END_POINTS` returns, flying (centroid above ``min_centroid_z``) and within
+    ``max_local_extent``."""
+    pool = (
+        (scores.n_points >= END_POINTS)
+        & (scores.centroid[:, 2] >= params.min_centroid_z)
+        & (scores.local_extent <= params.max_local_extent)
+    )
+    pool[selected] = False
+    inside = labels >= 0
+    pool[np.unique(labels[inside & ~was_split])] = False
+    return pool
+
+
+def _moving_ends(
+    labels: np.ndarray, xyz: np.ndarray, t: np.ndarray, clusters: np.ndarray
+) -> list[_PieceEnds]:
+    """The ends of ``clusters`` with a velocity at both ends: a piece of one or two
+    frames has no velocity to show it went the track's way, and distance alone reaches
+    a bird's returns 7 m off."""
+    out = []
+    for c in clusters:
+        member = labels == c
+        ends = _piece_ends(int(c), t[member], xyz[member])
+        if np.isfinite(ends.v_first).all() and np.isfinite(ends.v_last).all():
+            out.append(ends)
+    return out
+
+
+def _chains(
+    origin: _PieceEnds,
+    nodes: list[_PieceEnds],
+    scores: ClusterScores,
+    params: ParamSet,
+    reach: float,
+    backward: bool = False,
+) -> list[tuple[_PieceEnds, int, list[int]]]:
+    """Each node that a chain of pieces reaches from ``origin`` (later in time, or
+    earlier with ``backward``), each step at most ``reach`` seconds long and on the way
+    each end was going (:func:`_carries_on`), with the returns and pieces of the best
+    such chain (most returns)."""
+    order = sorted(nodes, key=lambda e: e.last if backward else e.first, reverse=backward)
+    path = [origin, *order]
+    best: list[tuple[int, list[int]] | None] = [(0, [])] + [None] * len(order)
+    for j in range(1, len(path)):
+        for i in range(j):
+            found = best[i]
+            if found is None:
+                continue
+            early, late = (path[j], path[i]) if backward else (path[i], path[j])
+            if not (
+                early.last < late.first <= early.last + reach and _carries_on(early, late, params)
+            ):
+                continue
+            points = found[0] + int(scores.n_points[path[j].cluster])
+            if best[j] is None or points > best[j][0]:
+                best[j] = (points, found[1] + [path[j].cluster])
+    return [(path[j], *best[j]) for j in range(1, len(path)) if best[j] is not None]
+
+
 def bridging_pieces(
     labels: np.ndarray,
     xyz: np.ndarray,
@@ -709,16 +777,7 @@ def bridging_pieces(
     if not params.bridge_split_pieces or len(selected) < 2:
         return []
     pieces = sorted(_selected_ends(labels, xyz, t, selected), key=lambda e: e.first)
-    pool = (
-        (scores.n_points >= END_POINTS)
-        & (scores.centroid[:, 2] >= params.min_centroid_z)
-        & (scores.local_extent <= params.max_local_extent)
-    )
-    pool[selected] = False
-    split_only = np.ones(pool.size, dtype=bool)
-    inside = labels >= 0
-    split_only[np.unique(labels[inside & ~was_split])] = False
-    pool &= split_only
+    pool = _split_pool(labels, scores, selected, was_split, params)
     reach = float(params.link_max_gap)
     added: list[int] = []
     for before, after in zip(pieces[:-1], pieces[1:], strict=True):
@@ -727,36 +786,53 @@ def bridging_pieces(
         )
         if between.size == 0 or after.first - before.last <= 0:
             continue
-        nodes = [before]
-        for c in between:
-            member = labels == c
-            ends = _piece_ends(int(c), t[member], xyz[member])
-            # A piece of one or two frames has no velocity to show it went the
-            # track's way, and distance alone reaches a bird's returns 7 m off.
-            if np.isfinite(ends.v_first).all() and np.isfinite(ends.v_last).all():
-                nodes.append(ends)
-        nodes[1:] = sorted(nodes[1:], key=lambda e: e.first)
-        # Best chain (most returns) from `before` to each node; None: unreachable.
-        best: list[tuple[int, list[int]] | None] = [(0, [])] + [None] * (len(nodes) - 1)
-        for j in range(1, len(nodes)):
-            for i in range(j):
-                if best[i] is None:
-                    continue
-                a, b = nodes[i], nodes[j]
-                if not (a.last < b.first <= a.last + reach and _carries_on(a, b, params)):
-                    continue
-                points = best[i][0] + int(scores.n_points[b.cluster])
-                if best[j] is None or points > best[j][0]:
-                    best[j] = (points, best[i][1] + [b.cluster])
+        nodes = _moving_ends(labels, xyz, t, between)
         chains = [
-            best[j]
-            for j in range(1, len(nodes))
-            if best[j] is not None
-            and nodes[j].last < after.first <= nodes[j].last + reach
-            and _carries_on(nodes[j], after, params)
+            (points, pieces_)
+            for last, points, pieces_ in _chains(before, nodes, scores, params, reach)
+            if last.last < after.first <= last.last + reach and _carries_on(last, after, params)
         ]
         if chains:
             added += max(chains, key=lambda chain: chain[0])[1]
+    return added
+
+
+def end_pieces(
+    labels: np.ndarray,
+    xyz: np.ndarray,
+    t: np.ndarray,
+    scores: ClusterScores,
+    selected: list[int],
+    was_split: np.ndarray,
+    params: ParamSet,
+) -> list[int]:
+    """bridge_end_gap (deviation 147): :func:`bridging_pieces` beyond the track's ends.
+    The pieces of split clusters (the same pool) after the last selected piece that
+    chain on from its end, and those before the first that chain into its start, each
+    step at most ``bridge_end_gap`` s long; at each end the chain with the most returns
+    is taken. A drone's returns after a half-second gap were in another cluster when the
+    linker ran (a bird's beside them, or a bird's four returns seconds earlier at the
+    same spot), and the split or the cut freed them too late to be linked; alone they
+    are too brief or too sparse to be selected. With steps as long as ``link_max_gap``,
+    birds' legs 1.3-1.9 s from a track's end joined it. Returns the pieces to add."""
+    gap = float(params.bridge_end_gap)
+    if gap <= 0 or not selected:
+        return []
+    pieces = _selected_ends(labels, xyz, t, selected)
+    if not pieces:
+        return []
+    pool = _split_pool(labels, scores, selected, was_split, params)
+    first = min(pieces, key=lambda e: e.first)
+    last = max(pieces, key=lambda e: e.last)
+    added: list[int] = []
+    for origin, backward, side in (
+        (last, False, scores.t_first > last.last),
+        (first, True, scores.t_last < first.first),
+    ):
+        nodes = _moving_ends(labels, xyz, t, np.flatnonzero(pool & side))
+        chains = _chains(origin, nodes, scores, params, gap, backward)
+        if chains:
+            added += max(chains, key=lambda chain: chain[1])[2]
     return added
 
 
@@ -1209,6 +1285,7 @@ def detect_offline(
     if was_split is not None:
         selected += continuing_pieces(labels, xyz, t, scores, selected, was_split, params)
         selected += bridging_pieces(labels, xyz, t, scores, selected, was_split, params)
+        selected += end_pieces(labels, xyz, t, scores, selected, was_split, params)
     lead_in = lead_in_piece(labels, xyz, t, scores, selected, params)
     selected += lead_in
     rows = scores.rows()

@@ -14,6 +14,7 @@ from clusterfilter_ros.core.offline import (
     bridging_pieces,
     continuing_pieces,
     detect_offline,
+    end_pieces,
     lead_in_piece,
     occupied_spans,
     reachable_pieces,
@@ -453,6 +454,34 @@ def test_no_bridge_with_a_step_off_the_track_or_too_long():
     t = np.where(labels == 2, 9.0, t)
     scores = score_clusters(labels, xyz, t, params, n_clusters=5)
     assert bridging_pieces(labels, xyz, t, scores, [0, 3], labels > 0, params) == []
+
+
+def test_split_pieces_chaining_on_from_the_track_s_ends_join_it():
+    labels, xyz, t, scores, params = _track_in_pieces()
+    split = labels > 0
+    wide = params.copy(bridge_end_gap=1.6)  # the fixture's steps are 1.5 s
+    # Cluster 0 selected alone: pieces 1, 2 and 3 chain on from its end; the bird 20 m
+    # off does not.
+    assert end_pieces(labels, xyz, t, scores, [0], split, wide) == [1, 2, 3]
+    # Cluster 3 selected alone, 0-2 split: the same chain backwards into its start.
+    assert end_pieces(labels, xyz, t, scores, [3], labels < 3, wide) == [2, 1, 0]
+    # Between two selected pieces is bridging_pieces' business, not this one's.
+    assert end_pieces(labels, xyz, t, scores, [0, 3], split, wide) == []
+    off = params.copy(bridge_end_gap=0.0)
+    assert end_pieces(labels, xyz, t, scores, [0], split, off) == []
+    # Pieces not made only of split points are tracks of their own.
+    assert end_pieces(labels, xyz, t, scores, [0], labels == 4, wide) == []
+
+
+def test_no_end_chain_off_the_track_or_across_a_long_gap():
+    # The second piece 20 m above the track: the chain stops at the first.
+    labels, xyz, t, scores, params = _track_in_pieces(lift=20.0)
+    wide = params.copy(bridge_end_gap=1.6)
+    assert end_pieces(labels, xyz, t, scores, [0], labels > 0, wide) == [1]
+    # Steps of 1.5 s: none with bridge_end_gap 1 s (the default).
+    labels, xyz, t, scores, params = _track_in_pieces()
+    assert params.bridge_end_gap == 1.0
+    assert end_pieces(labels, xyz, t, scores, [0], labels > 0, params) == []
 
 
 def test_occupied_spans_break_at_gaps_over_the_limit():
