@@ -911,6 +911,18 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         maximum=100.0,
     ),
     ParamSpec(
+        "split_contact_apart",
+        "bool",
+        True,
+        "Streaming: a wide flying cluster left whole for its contact with suppressed "
+        "structure (more than 10% of its returns, motion coherence below 0.4) is split "
+        "anyway when at least a tenth of its returns lie below min_centroid_z, its "
+        "coherence is at least 0.2, and it is two objects as split_apart measures them "
+        "(returns of two of its kinematic tracks more than split_apart apart in at least "
+        "three frame samples): a drone passing low beside a walking person and a tree "
+        "joined the person's cluster (deviation 148); false = contact alone decides.",
+    ),
+    ParamSpec(
         "stream_split_excess_residual",
         "float",
         1.0,

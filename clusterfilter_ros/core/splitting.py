@@ -64,6 +64,15 @@ MAX_CONTACT = 0.1
 #: Remnants of walls and crowns mostly measure 0-0.1 (a few 0.3-0.46 in the streaming
 #: history); a drone merged with birds circling it 0.55-0.65 (docs/detector.md, dev. 57).
 MOVING_COHERENCE = 0.4
+#: A cluster left whole for its contact with structure is tested for :func:`two_objects`
+#: (``split_and_score``'s ``contact_apart``) from this motion coherence (the remnants of
+#: walls that test as two objects measured 0.02-0.14, a drone merged with a walking
+#: person 0.21-0.38) ...
+APART_COHERENCE = 0.2
+#: ... and this share of its returns below ``min_centroid_z``: an object on the ground
+#: (a person) joined to one in the air. Birds joined to a drone (none near the ground)
+#: split off this way were reported, a flock's bird too (deviation 148).
+GROUND_SHARE = 0.1
 #: Seconds per centroid in :func:`still_run`: several sweeps of a sparse drone's returns.
 STILL_STEP = 0.5
 #: :func:`two_objects`: the kinematic tracks compared hold at least this many returns
@@ -324,6 +333,7 @@ def split_merged(
     cascade: bool = False,
     also: np.ndarray | None = None,
     among: np.ndarray | None = None,
+    apart: float = 0.0,
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """Labels with each of :func:`merged_clusters` (``min_extent``, ``excess_residual``
     and ``excess_min_points`` passed on), and each cluster in ``also``, replaced by its
@@ -332,9 +342,13 @@ def split_merged(
 
     With ``structure_keys`` (sorted ``static_voxel`` keys of suppressed structure), a
     cluster with more than ``MAX_CONTACT`` of its points in or next to those voxels is
-    left whole unless its motion coherence is at least ``MOVING_COHERENCE``: what static
-    suppression left of a wall or a tree, not objects in the air. Returns (compact labels,
-    K, (N,) bool mask of the points that were in a split cluster).
+    left whole unless its motion coherence is at least ``MOVING_COHERENCE``, or, with
+    ``apart`` > 0, it has at least ``GROUND_SHARE`` of its returns below
+    ``min_centroid_z``, a coherence of at least ``APART_COHERENCE`` and is
+    :func:`two_objects` at that distance: what static suppression left of a wall or a
+    tree, not objects in the air.
+    Returns (compact labels, K, (N,) bool mask of the points that were in a split
+    cluster).
     """
     labels = np.asarray(labels, dtype=np.int64)
     k = int(labels.max()) + 1 if labels.size else 0
@@ -352,7 +366,18 @@ def split_merged(
             labels[member], xyz[member], k, which, structure_keys, float(params.static_voxel)
         )
         moving = scores.coherence[split] >= MOVING_COHERENCE
-        split = split[(contact[split] <= MAX_CONTACT) | moving]
+        free = (contact[split] <= MAX_CONTACT) | moving
+        if apart > 0:
+            # Deviation 148: a drone that passed a walking person beside a tree joined the
+            # person's cluster; the remnants of walls and crowns are one object each.
+            counts = np.bincount(labels[member], minlength=k)
+            low = np.bincount(labels[member & (xyz[:, 2] < params.min_centroid_z)], minlength=k)
+            ground = low[split] >= GROUND_SHARE * np.maximum(counts[split], 1)
+            test = ~free & ground & (scores.coherence[split] >= APART_COHERENCE)
+            for i in np.flatnonzero(test):
+                one = labels == split[i]
+                free[i] = two_objects(xyz[one], t[one], apart, params)
+        split = split[free]
     if split.size == 0:
         return labels, k, np.zeros(labels.size, dtype=bool)
     out = labels.copy()
@@ -384,10 +409,13 @@ def split_and_score(
     two_trackers: bool = False,
     apart: float = 0.0,
     among: np.ndarray | None = None,
+    contact_apart: bool = False,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
     """:func:`split_merged`, then the scores of the new labels; with ``apart`` > 0,
-    the confident clusters of :func:`crossed_clusters` are split too; with ``among``,
-    only clusters in it are split.
+    the confident clusters of :func:`crossed_clusters` are split too, and with
+    ``contact_apart`` so are those left whole for their contact with structure that hold
+    an object on the ground and are :func:`two_objects` at ``apart`` (:func:`split_merged`);
+    with ``among``, only clusters in it are split.
 
     Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
     window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
@@ -415,11 +443,12 @@ def split_and_score(
             scores, params, min_extent, excess_residual, excess_min_points, high
         )
         also = crossed_clusters(labels, xyz, t, scores, params, apart, merged)
-    out, k, was_split = split_merged(*args, also=also, among=among)
+    near = apart if contact_apart else 0.0
+    out, k, was_split = split_merged(*args, also=also, among=among, apart=near)
     pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)
     if not two_trackers or not was_split.any():
         return out, k, pieces, was_split
-    alt, k_alt, _ = split_merged(*args, cascade=True, also=also, among=among)
+    alt, k_alt, _ = split_merged(*args, cascade=True, also=also, among=among, apart=near)
     alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
     rank, alt_rank = _reportable_rank(pieces, params), _reportable_rank(alt_pieces, params)
     better = []

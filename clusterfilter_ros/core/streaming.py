@@ -1786,6 +1786,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             excess_residual=p.stream_split_excess_residual,
             excess_min_points=3 * ps.min_cluster_points,
             apart=p.split_apart,
+            contact_apart=p.split_contact_apart,
         )
     if p.report_lag > 0 and (p.report_extend_head or p.report_extend_tail or p.report_fill):
         # Noise and clusters too small to be judged alone, as offline grows into.

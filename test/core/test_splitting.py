@@ -278,6 +278,72 @@ def test_a_moving_cluster_is_split_beside_structure_of_its_own():
     assert after.candidate[drone_label]
 
 
+def _drone_past_walker(seed: int = 0):
+    """(xyz, t, drone mask): a drone crossing at 2.5 m/s, 3 m up, three returns per frame,
+    and a person walking at 1.5 m/s, two returns per frame at their feet, 4-7 m from it,
+    over 8 s; one cluster would hold both."""
+    rng = np.random.default_rng(seed)
+    stamps = np.arange(0.0, 8.0, 0.1)
+    td, tp = np.repeat(stamps, 3), np.repeat(stamps, 2)
+    drone = np.column_stack([-10 + 2.5 * td, np.full(td.size, 4.0), np.full(td.size, 3.0)])
+    person = np.column_stack([np.full(tp.size, -5.6), 5 - 1.5 * tp, np.full(tp.size, 0.1)])
+    xyz = np.vstack([drone, person]) + rng.normal(0.0, 0.05, (td.size + tp.size, 3))
+    return xyz, np.concatenate([td, tp]), np.arange(td.size + tp.size) < td.size
+
+
+def test_two_objects_touching_structure_are_split_with_contact_apart():
+    """fast_pass 7202 (71st set): a drone passing a walking person and a tree joined the
+    person's cluster, which touched structure; the whole barely moved coherently. Split
+    as two objects only with a tenth of its returns near the ground."""
+    params = detector_params()
+    xyz, t, drone = _drone_past_walker()
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    assert splitting.APART_COHERENCE <= scores.coherence[0] < MOVING_COHERENCE
+    structure = np.unique(voxel.voxel_keys(xyz[~drone], params.static_voxel))
+    args = (labels, xyz, t, scores, params, structure, params.stream_split_min_extent)
+    out, k, was_split = split_merged(*args)
+    assert k == 1 and not was_split.any()  # left whole for its contact
+    out, k, was_split = split_merged(*args, apart=params.split_apart)
+    assert k == 2 and was_split.all()
+    assert np.unique(out[drone]).size == 1 and not np.isin(out[~drone], out[drone]).any()
+    # The same two objects both in the air (a bird, not a person): left whole.
+    lifted = xyz + np.where(drone, 0.0, 5.0)[:, None] * np.array([0.0, 0.0, 1.0])
+    beside = np.unique(voxel.voxel_keys(lifted[~drone], params.static_voxel))
+    out, k, was_split = split_merged(
+        labels,
+        lifted,
+        t,
+        score_clusters(labels, lifted, t, params, n_clusters=1),
+        params,
+        beside,
+        params.stream_split_min_extent,
+        apart=params.split_apart,
+    )
+    assert k == 1 and not was_split.any()
+    # split_and_score passes it on only with contact_apart.
+    score = functools.partial(score_clusters, t0=0.0, coherence_origin=0.0)
+    kw = dict(min_extent=params.stream_split_min_extent, apart=params.split_apart)
+    assert split_and_score(labels, xyz, t, scores, params, score, structure, **kw)[1] == 1
+    kw["contact_apart"] = True
+    assert split_and_score(labels, xyz, t, scores, params, score, structure, **kw)[1] == 2
+
+
+def test_a_wall_remnant_is_not_tested_for_two_objects():
+    params = detector_params()
+    xyz, t = _thinned_wall()
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    # Scattered returns over 30 m are "two objects", but the remnant does not move.
+    assert two_objects(xyz, t, params.split_apart, params)
+    assert scores.coherence[0] < splitting.APART_COHERENCE
+    structure = np.unique(voxel.voxel_keys(xyz, params.static_voxel))
+    out, k, was_split = split_merged(
+        labels, xyz, t, scores, params, structure, apart=params.split_apart
+    )
+    assert k == 1 and not was_split.any()
+
+
 def test_only_the_pieces_are_scored_again_and_match_a_full_rescoring():
     params = detector_params()
     xyz, t, drone = _merged_scene()
