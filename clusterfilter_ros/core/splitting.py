@@ -70,8 +70,9 @@ MOVING_COHERENCE = 0.4
 #: person 0.21-0.38) ...
 APART_COHERENCE = 0.2
 #: ... and this share of its returns below ``min_centroid_z``: an object on the ground
-#: (a person) joined to one in the air. Birds joined to a drone (none near the ground)
-#: split off this way were reported, a flock's bird too (deviation 148).
+#: (a person) joined to one in the air. Without it, drones among birds (no returns near
+#: the ground) were split this way too, and a flock split into single birds had one
+#: reported (deviation 148).
 GROUND_SHARE = 0.1
 #: Seconds per centroid in :func:`still_run`: several sweeps of a sparse drone's returns.
 STILL_STEP = 0.5
