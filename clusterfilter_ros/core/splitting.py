@@ -368,13 +368,13 @@ def split_merged(
         )
         moving = scores.coherence[split] >= MOVING_COHERENCE
         free = (contact[split] <= MAX_CONTACT) | moving
-        if apart > 0:
+        test = ~free & (scores.coherence[split] >= APART_COHERENCE)
+        if apart > 0 and test.any():
             # Deviation 148: a drone that passed a walking person beside a tree joined the
             # person's cluster; the remnants of walls and crowns are one object each.
             counts = np.bincount(labels[member], minlength=k)
             low = np.bincount(labels[member & (xyz[:, 2] < params.min_centroid_z)], minlength=k)
-            ground = low[split] >= GROUND_SHARE * np.maximum(counts[split], 1)
-            test = ~free & ground & (scores.coherence[split] >= APART_COHERENCE)
+            test &= low[split] >= GROUND_SHARE * np.maximum(counts[split], 1)
             for i in np.flatnonzero(test):
                 one = labels == split[i]
                 free[i] = two_objects(xyz[one], t[one], apart, params)
