@@ -923,6 +923,15 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "joined the person's cluster (deviation 148); false = contact alone decides.",
     ),
     ParamSpec(
+        "split_contact_tracked",
+        "bool",
+        True,
+        "Streaming (with split_contact_apart): the cluster holding the reported track's "
+        "recent returns near where the track would be is tested the same way without the "
+        "returns below min_centroid_z: a tracked drone that flew into a flock beside the "
+        "birds' own static voxels stays whole otherwise (deviation 149).",
+    ),
+    ParamSpec(
         "stream_split_excess_residual",
         "float",
         1.0,

@@ -335,6 +335,7 @@ def split_merged(
     also: np.ndarray | None = None,
     among: np.ndarray | None = None,
     apart: float = 0.0,
+    tracked: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """Labels with each of :func:`merged_clusters` (``min_extent``, ``excess_residual``
     and ``excess_min_points`` passed on), and each cluster in ``also``, replaced by its
@@ -374,7 +375,11 @@ def split_merged(
             # person's cluster; the remnants of walls and crowns are one object each.
             counts = np.bincount(labels[member], minlength=k)
             low = np.bincount(labels[member & (xyz[:, 2] < params.min_centroid_z)], minlength=k)
-            test &= low[split] >= GROUND_SHARE * np.maximum(counts[split], 1)
+            grounded = low[split] >= GROUND_SHARE * np.maximum(counts[split], 1)
+            if tracked is not None and len(tracked):
+                # Deviation 149: the cluster holding the reported track's recent returns.
+                grounded |= np.isin(split, tracked)
+            test &= grounded
             for i in np.flatnonzero(test):
                 one = labels == split[i]
                 free[i] = two_objects(xyz[one], t[one], apart, params)
@@ -411,6 +416,7 @@ def split_and_score(
     apart: float = 0.0,
     among: np.ndarray | None = None,
     contact_apart: bool = False,
+    tracked: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, ClusterScores, np.ndarray]:
     """:func:`split_merged`, then the scores of the new labels; with ``apart`` > 0,
     the confident clusters of :func:`crossed_clusters` are split too, and with
@@ -445,11 +451,13 @@ def split_and_score(
         )
         also = crossed_clusters(labels, xyz, t, scores, params, apart, merged)
     near = apart if contact_apart else 0.0
-    out, k, was_split = split_merged(*args, also=also, among=among, apart=near)
+    out, k, was_split = split_merged(*args, also=also, among=among, apart=near, tracked=tracked)
     pieces = score_pieces(labels, out, k, was_split, xyz, t, scores, params, score)
     if not two_trackers or not was_split.any():
         return out, k, pieces, was_split
-    alt, k_alt, _ = split_merged(*args, cascade=True, also=also, among=among, apart=near)
+    alt, k_alt, _ = split_merged(
+        *args, cascade=True, also=also, among=among, apart=near, tracked=tracked
+    )
     alt_pieces = score_pieces(labels, alt, k_alt, was_split, xyz, t, scores, params, score)
     rank, alt_rank = _reportable_rank(pieces, params), _reportable_rank(alt_pieces, params)
     better = []

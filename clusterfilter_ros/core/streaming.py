@@ -1774,6 +1774,16 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
     )
     scores = scorer(labels, xyz, t, ps, n_clusters=k)
     if p.split_merged:
+        tracked = None
+        if (
+            p.split_contact_tracked
+            and p.split_contact_apart
+            and snap.expected is not None
+            and snap.track_from is not None
+            and snap.now - snap.track_from >= p.min_track_seconds
+        ):
+            c = _track_cluster(*snap.expected, labels, xyz, t, snap.now - p.track_window)
+            tracked = None if c is None else np.array([c])
         labels, k, scores, _ = split_and_score(
             labels,
             xyz,
@@ -1787,6 +1797,7 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
             excess_min_points=3 * ps.min_cluster_points,
             apart=p.split_apart,
             contact_apart=p.split_contact_apart,
+            tracked=tracked,
         )
     if p.report_lag > 0 and (p.report_extend_head or p.report_extend_tail or p.report_fill):
         # Noise and clusters too small to be judged alone, as offline grows into.

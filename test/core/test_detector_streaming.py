@@ -82,6 +82,38 @@ def test_streaming_splits_a_narrow_irregular_cluster_with_its_own_bound(scene, m
     assert seen and set(seen) == {(0.7, 36)}
 
 
+@pytest.mark.parametrize("on", [True, False])
+def test_the_reported_tracks_cluster_is_passed_to_the_split_once_confirmed(scene, monkeypatch, on):
+    # Deviation 149: the cluster holding the reported track's recent returns is passed
+    # as ``tracked`` once the track has been reported for min_track_seconds.
+    from clusterfilter_ros.core import streaming
+
+    seen = []
+    real = streaming.split_and_score
+
+    def spy(labels, xyz, t, *args, **kwargs):
+        tracked = kwargs["tracked"]
+        n = None if tracked is None else int(np.count_nonzero(labels == tracked[0]))
+        seen.append((float(t.max()), n))
+        return real(labels, xyz, t, *args, **kwargs)
+
+    monkeypatch.setattr(streaming, "split_and_score", spy)
+    frames, _, _ = scene(duration=14.0, wall_points=100)
+    params = detector_params({"split_contact_tracked": on})
+    det = StreamingDetector(params)
+    reported = [e.stamp for f in frames if (e := det.push(f)) is not None]
+    assert reported
+    passed = [(now, n) for now, n in seen if n is not None]
+    if not on:
+        assert not passed
+        return
+    assert passed and all(n > 0 for _, n in passed)
+    # Only once reported, and with samples over min_track_seconds (from the drone's
+    # first returns at the stream's start).
+    first = min(now for now, _ in passed)
+    assert first > reported[0] and first >= frames[0].stamp + params.min_track_seconds
+
+
 def test_drone_free_stream_is_quiet(scene):
     frames, _, _ = scene(duration=8.0, drone=False, wall_points=400)
     assert run_streaming(frames) == []

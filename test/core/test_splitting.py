@@ -329,6 +329,35 @@ def test_two_objects_touching_structure_are_split_with_contact_apart():
     assert split_and_score(labels, xyz, t, scores, params, score, structure, **kw)[1] == 2
 
 
+def test_the_tracked_cluster_touching_structure_is_split_without_the_ground():
+    """birds 7401 (73rd set): the tracked drone flew into birds beside their own static
+    voxels, and the whole (coherence 0.27) was left as a remnant of structure: nothing
+    of it lies near the ground. The cluster holding the reported track is tested anyway
+    (deviation 149); another cluster is not."""
+    params = detector_params()
+    xyz, t, drone = _drone_past_walker()
+    # The walker lifted 5 m: a bird in the air beside the drone.
+    xyz = xyz + np.where(drone, 0.0, 5.0)[:, None] * np.array([0.0, 0.0, 1.0])
+    labels = np.zeros(t.size, np.int64)
+    scores = score_clusters(labels, xyz, t, params, n_clusters=1)
+    assert splitting.APART_COHERENCE <= scores.coherence[0] < MOVING_COHERENCE
+    structure = np.unique(voxel.voxel_keys(xyz[~drone], params.static_voxel))
+    args = (labels, xyz, t, scores, params, structure, params.stream_split_min_extent)
+    kw = dict(apart=params.split_apart)
+    assert split_merged(*args, **kw)[1] == 1
+    assert split_merged(*args, **kw, tracked=np.array([1]))[1] == 1  # another cluster
+    out, k, was_split = split_merged(*args, **kw, tracked=np.array([0]))
+    assert k == 2 and was_split.all()
+    assert np.unique(out[drone]).size == 1 and not np.isin(out[~drone], out[drone]).any()
+    # Only where contact_apart is on does split_and_score pass it on.
+    score = functools.partial(score_clusters, t0=0.0, coherence_origin=0.0)
+    kw = dict(min_extent=params.stream_split_min_extent, apart=params.split_apart)
+    tracked = np.array([0])
+    assert split_and_score(*args[:5], score, structure, **kw, tracked=tracked)[1] == 1
+    kw["contact_apart"] = True
+    assert split_and_score(*args[:5], score, structure, **kw, tracked=tracked)[1] == 2
+
+
 def test_a_wall_remnant_is_not_tested_for_two_objects():
     params = detector_params()
     xyz, t = _thinned_wall()
