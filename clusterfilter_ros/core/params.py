@@ -1223,10 +1223,20 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "smooth_accel",
         "float",
+        3.0,
+        "Normalized scoring, offline: mean fitted acceleration (m/s^2) at or below which a "
+        "cluster keeps full confidence. Drones fly acceleration-limited paths (simulated: "
+        "median 2.5, 90% below 5.2 over 1 s windows); birds weave (median 12). 4 until "
+        "deviation 150: birds' straight legs at 4.1-4.9 were reported offline.",
+        minimum=0.0,
+        maximum=1000.0,
+    ),
+    ParamSpec(
+        "stream_smooth_accel",
+        "float",
         4.0,
-        "Normalized scoring: mean fitted acceleration (m/s^2) at or below which a cluster "
-        "keeps full confidence. Drones fly acceleration-limited paths (simulated: median "
-        "2.5, 90% below 5.2 over 1 s windows); birds weave (median 12).",
+        "Normalized scoring, streaming: smooth_accel for the re-clusterings (a track's "
+        "first seconds fit a less certain acceleration).",
         minimum=0.0,
         maximum=1000.0,
     ),

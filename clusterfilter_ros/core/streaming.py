@@ -1747,8 +1747,9 @@ def _recluster_snapshot(snap: _HistorySnapshot) -> _TrackChoice:
 
     if xyz is None or t is None or t.size == 0:
         return choice(None, 0.0, False, 0)
-    # Clusters are scored with streaming's own smallest candidate size.
-    ps = p.copy(min_cluster_points=p.stream_min_cluster_points)
+    # Clusters are scored with streaming's own smallest candidate size and acceleration
+    # ramp (deviation 150).
+    ps = p.copy(min_cluster_points=p.stream_min_cluster_points, smooth_accel=p.stream_smooth_accel)
     linking = p.copy(link_max_dv=p.stream_link_max_dv)
     labels, k = global_clusters(xyz, t, linking, passes=p.stream_link_passes)
     tight_hover = None  # deviation 96, on while it asks fewer frames than hover_min_frames

@@ -405,3 +405,22 @@ def test_local_scatter_follows_a_drift_but_not_a_scatter():
     assert scatter[2] == pytest.approx(1.0)
     assert scatter[3] == 0.0
     assert local_scatter(np.empty(0, int), np.empty((0, 3)), np.empty(0), 2).tolist() == [0, 0]
+
+
+def test_the_acceleration_ramp_starts_at_smooth_accel():
+    # Deviation 150: offline's ramp starts at 3 m/s^2 (it was 4). A leg at 8 m/s weaving
+    # 0.55 m sideways every 2 s fits about 3.3 m/s^2: full confidence from 4, scaled by
+    # (max_accel - a) / (max_accel - smooth_accel) from 3.
+    rng = np.random.default_rng(0)
+    t = np.repeat(np.arange(0.0, 8.0, 0.1), 4)
+    xyz = np.column_stack([8.0 * t - 30, 0.55 * np.sin(np.pi * t), np.full(t.size, 20.0)])
+    xyz = xyz + rng.normal(0.0, 0.05, xyz.shape)
+    lab = np.zeros(t.size, int)
+    params = detector_params()
+    assert params.smooth_accel == 3.0 and params.stream_smooth_accel == 4.0
+    now = score_clusters(lab, xyz, t, params, n_clusters=1)
+    before = score_clusters(lab, xyz, t, detector_params({"smooth_accel": 4.0}), n_clusters=1)
+    a = float(now.acceleration[0])
+    assert 3.0 < a < 4.0 and before.acceleration[0] == a
+    ramp = (params.max_accel - a) / (params.max_accel - params.smooth_accel)
+    assert now.confidence[0] == pytest.approx(before.confidence[0] * ramp)

@@ -82,6 +82,24 @@ def test_streaming_splits_a_narrow_irregular_cluster_with_its_own_bound(scene, m
     assert seen and set(seen) == {(0.7, 36)}
 
 
+def test_streaming_scores_with_its_own_acceleration_ramp(scene, monkeypatch):
+    # Deviation 150: offline's ramp starts at smooth_accel, streaming's at
+    # stream_smooth_accel.
+    from clusterfilter_ros.core import streaming
+
+    seen = set()
+    real = streaming.score_clusters
+
+    def spy(labels, xyz, t, params, **kwargs):
+        seen.add(params.smooth_accel)
+        return real(labels, xyz, t, params, **kwargs)
+
+    monkeypatch.setattr(streaming, "score_clusters", spy)
+    frames, _, _ = scene(duration=5.0, wall_points=100)
+    run_streaming(frames, detector_params({"smooth_accel": 2.5, "stream_smooth_accel": 4.5}))
+    assert seen == {4.5}
+
+
 @pytest.mark.parametrize("on", [True, False])
 def test_the_reported_tracks_cluster_is_passed_to_the_split_once_confirmed(scene, monkeypatch, on):
     # Deviation 149: the cluster holding the reported track's recent returns is passed
