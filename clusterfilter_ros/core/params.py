@@ -926,10 +926,11 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "split_contact_tracked",
         "bool",
         True,
-        "Streaming (with split_contact_apart): the cluster holding the reported track's "
-        "recent returns near where the track would be is tested the same way without the "
-        "returns below min_centroid_z: a tracked drone that flew into a flock beside the "
-        "birds' own static voxels stays whole otherwise (deviation 149).",
+        "Streaming (with split_contact_apart): once the reported track's samples span "
+        "min_track_seconds, the cluster holding its recent returns near where it would be "
+        "is tested the same way without the returns below min_centroid_z: a tracked drone "
+        "that flew into birds beside their own static voxels stays whole otherwise "
+        "(deviation 149).",
     ),
     ParamSpec(
         "stream_split_excess_residual",
@@ -1227,7 +1228,7 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
         "Normalized scoring, offline: mean fitted acceleration (m/s^2) at or below which a "
         "cluster keeps full confidence. Drones fly acceleration-limited paths (simulated: "
         "median 2.5, 90% below 5.2 over 1 s windows); birds weave (median 12). 4 until "
-        "deviation 150: birds' straight legs at 4.1-4.9 were reported offline.",
+        "deviation 150: birds' straight legs at 4.1-5.5 were reported offline.",
         minimum=0.0,
         maximum=1000.0,
     ),

@@ -348,7 +348,8 @@ def split_merged(
     ``apart`` > 0, it has at least ``GROUND_SHARE`` of its returns below
     ``min_centroid_z``, a coherence of at least ``APART_COHERENCE`` and is
     :func:`two_objects` at that distance: what static suppression left of a wall or a
-    tree, not objects in the air.
+    tree, not objects in the air. The clusters in ``tracked`` (the one holding the
+    reported track, deviation 149) are tested without the share near the ground.
     Returns (compact labels, K, (N,) bool mask of the points that were in a split
     cluster).
     """
@@ -421,8 +422,9 @@ def split_and_score(
     """:func:`split_merged`, then the scores of the new labels; with ``apart`` > 0,
     the confident clusters of :func:`crossed_clusters` are split too, and with
     ``contact_apart`` so are those left whole for their contact with structure that hold
-    an object on the ground and are :func:`two_objects` at ``apart`` (:func:`split_merged`);
-    with ``among``, only clusters in it are split.
+    an object on the ground and are :func:`two_objects` at ``apart`` (:func:`split_merged`;
+    for the clusters in ``tracked``, whatever lies near the ground); with ``among``,
+    only clusters in it are split.
 
     Scores are per cluster, so only the pieces are scored (``score`` must use a fixed
     window origin, ``t0``); the clusters left whole keep theirs. With ``two_trackers``
