@@ -814,7 +814,8 @@ def end_pieces(
     linker ran (a bird's beside them, or a bird's four returns seconds earlier at the
     same spot), and the split or the cut freed them too late to be linked; alone they
     are too brief or too sparse to be selected. With steps as long as ``link_max_gap``,
-    birds' legs 1.3-1.9 s from a track's end joined it. Returns the pieces to add."""
+    birds' legs 1.3-1.9 s from a track's end joined it; with 1.0 s a drone's piece
+    1.08 s on was lost (deviation 151 made it 1.3 s). Returns the pieces to add."""
     gap = float(params.bridge_end_gap)
     if gap <= 0 or not selected:
         return []

@@ -449,14 +449,14 @@ DETECTOR_PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "bridge_end_gap",
         "float",
-        1.0,
+        1.3,
         "Offline: as bridge_split_pieces, beyond the track's ends: the pieces of split "
         "clusters that chain on from the last selected piece's end (or into the first "
         "one's start), each step at most this many seconds long and where both ends were "
         "heading, are reported with the track. A drone's returns after a half-second gap "
         "were in another cluster when the linker ran, and the split freed them too late "
-        "to be linked; steps as long as link_max_gap took birds' legs (deviation 147); "
-        "0 = off.",
+        "to be linked; steps as long as link_max_gap took birds' legs 1.3-1.9 s from a "
+        "track's end (deviation 147; 1.0 s until deviation 151); 0 = off.",
         minimum=0.0,
         maximum=10.0,
     ),
