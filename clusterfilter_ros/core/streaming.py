@@ -314,11 +314,22 @@ def _recent_samples(
     ``track_window`` up to it or, for a sparse track, the last three within
     ``link_max_gap``, so that a return after a gap is not averaged with the one before
     it."""
+    samples = list(samples)
+    keep = _recent_mask(np.array([s.t for s in samples]), last, params)
+    return [s for s, k in zip(samples, keep, strict=True) if k]
+
+
+def _recent_mask(times: np.ndarray, last: float, params: ParamSet) -> np.ndarray:
+    """(S,) bool: which of the samples at ``times`` (in time order) :func:`_recent_samples`
+    keeps."""
     p = params
-    recent = [s for s in samples if last - p.track_window <= s.t <= last]
-    if len(recent) < 3:
-        reach = last - max(p.track_window, p.link_max_gap)
-        recent = [s for s in samples if reach <= s.t <= last][-3:]
+    recent = (times >= last - p.track_window) & (times <= last)
+    if np.count_nonzero(recent) < 3:
+        within = np.flatnonzero(
+            (times >= last - max(p.track_window, p.link_max_gap)) & (times <= last)
+        )
+        recent = np.zeros(times.size, dtype=bool)
+        recent[within[-3:]] = True
     return recent
 
 
@@ -359,9 +370,10 @@ class _HistorySnapshot:
     params: ParamSet
     # Time of the reported track's oldest sample, with ``expected``.
     track_from: float | None = None
-    # (times (S,), positions (S, 3)) of the reported track's samples, with ``expected``
-    # (stream_track_agree, and stream_split_track's share before the piece).
-    track_path: tuple[np.ndarray, np.ndarray] | None = None
+    # (times (S,), positions (S, 3), point counts (S,)) of the reported track's samples,
+    # with ``expected`` (stream_track_agree, and stream_split_track's share before the
+    # piece).
+    track_path: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     # Stamp since which every lidar seen so far has sent frames without a pause
     # (stream_static_drift: the map watched the scene only then).
     watched_since: float = -math.inf
@@ -808,9 +820,7 @@ class StreamingDetector:
             else (self._last_reported[0], self._last_reported[1]),
             params=p,
             track_from=None if expected is None or not self._track else self._track[0].t,
-            track_path=None
-            if expected is None or not self._track
-            else _sample_arrays(self._track)[:2],
+            track_path=None if expected is None or not self._track else _sample_arrays(self._track),
             watched_since=self._watched_since,
             floor=floor,
         )
@@ -1047,15 +1057,26 @@ class StreamingDetector:
     def _carry_over(self, old_track: list[_TrackSample]) -> None:
         """Re-append samples the previous track had gathered between re-clusterings (gated
         returns the clusterer may now call noise) beyond the rebuilt track's newest one,
-        each while it stays within ``track_gate`` of the rebuilt track's prediction."""
+        each while it stays within ``track_gate`` of the rebuilt track's prediction. With
+        ``stream_carry_gap`` (deviation 152), where the rebuilt track ends more than
+        ``max_extrapolation`` before such a sample (no prediction), the sample is kept
+        if it follows at most ``stream_carry_gap`` after the rebuilt track's newest
+        sample and lies where the track's own motion reaches (:func:`_on_own_path`)."""
         if not self._track:
             return
-        gate2 = self.params.track_gate**2
+        p = self.params
+        gate2 = p.track_gate**2
         for sample in old_track:
             if sample.t <= self._track[-1].t:
                 continue
             fit = self._fit(sample.t)
-            if fit is None or float(np.sum((sample.position - fit[0]) ** 2)) > gate2:
+            if fit is None:
+                if not (
+                    sample.t - self._track[-1].t <= p.stream_carry_gap
+                    and _on_own_path(self._track, sample, p)
+                ):
+                    break
+            elif float(np.sum((sample.position - fit[0]) ** 2)) > gate2:
                 break
             self._track.append(sample)
 
@@ -1880,7 +1901,7 @@ def _track_samples(
     xyz: np.ndarray,
     t: np.ndarray,
     params: ParamSet,
-    reported: tuple[np.ndarray, np.ndarray] | None = None,
+    reported: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> list[_TrackSample]:
     """A track from the points in ``mask``: one sample per half frame period (of a half
     frame whose returns span more than ``track_join_link``, its largest group,
@@ -1972,14 +1993,17 @@ def _main_group(points: np.ndarray, link: float, near: np.ndarray | None) -> np.
 def _off_reported(
     times: np.ndarray,
     means: np.ndarray,
-    reported: tuple[np.ndarray, np.ndarray] | None,
+    reported: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
     params: ParamSet,
 ) -> np.ndarray:
     """(S,) bool: the samples (``times``, ``means``) that contradict the reported track
     (deviation 115, :func:`_track_samples`): if at least :data:`_SHARED_SAMPLES` of them
     are the reported track's own (same time and place), those more than ``track_gate``
     from where it was, linearly between two of its samples at most ``link_max_gap``
-    apart. All False otherwise: another object chosen is not judged by the old track."""
+    apart, and, with ``stream_carry_gap`` (deviation 152), those within ``link_max_gap``
+    after its newest sample that its own straight-line motion does not reach
+    (:func:`_reaches`: ``track_gate`` plus ``link_max_accel`` x dt^2 / 2). All False
+    otherwise: another object chosen is not judged by the old track."""
     out = np.zeros(times.size, dtype=bool)
     if reported is None or times.size == 0 or reported[0].size < 2:
         return out
@@ -1998,7 +2022,17 @@ def _off_reported(
     w = np.where(bracketed, (times - rt[j - 1]) / np.where(gap > 0, gap, 1.0), 0.0)
     where = rp[j - 1] + w[:, None] * (rp[j] - rp[j - 1])
     off = np.linalg.norm(means - where, axis=1) > params.track_gate
-    return bracketed & off & ~same
+    out = bracketed & off & ~same
+    if params.stream_carry_gap > 0:
+        # Deviation 152: within link_max_gap after its newest sample, where the reported
+        # track's own motion does not reach.
+        after = np.flatnonzero((times > rt[-1]) & (times - rt[-1] <= params.link_max_gap))
+        recent = _recent_mask(rt, float(rt[-1]), params)
+        ts, ps, ws = rt[recent], rp[recent], reported[2][order][recent]
+        if after.size and _spans_velocity(ts, params):
+            for i in after:
+                out[i] = not _reaches(ts, ps, ws, rt[-1], float(times[i]), means[i], params)
+    return out
 
 
 def _after_run(run: tuple[float, float, bool]) -> float:
@@ -2119,7 +2153,7 @@ def _off_structure_segments(
     t: np.ndarray,
     structure: np.ndarray | None,
     params: ParamSet,
-    path: tuple[np.ndarray, np.ndarray] | None = None,
+    path: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """stream_segment_contact (deviation 143): ``mask`` without its segments (its returns
     cut where they are more than ``max_gap`` apart) of which more than
@@ -2527,7 +2561,7 @@ def _competing_track(
     c = _newest_cluster(snap, labels, xyz, t, p)
     if c is None or c == best:
         return None
-    times, positions = snap.track_path
+    times, positions, _ = snap.track_path
     before = np.flatnonzero(times < scores.t_first[c])
     if not before.size:
         return None

@@ -223,6 +223,12 @@ def test_update_params_resets_only_when_needed(scene):
     assert det.stats()["local_points"] == 0
 
 
+def _path(times, positions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A reported track's (times, positions, point counts), one return per sample."""
+    times = np.asarray(times, dtype=np.float64)
+    return times, np.asarray(positions, dtype=np.float64), np.ones(times.size)
+
+
 def _tracked(times, positions, **values):
     """A detector whose track holds one 3-point sample per given time (confirmed)."""
     from clusterfilter_ros.core.streaming import _TrackSample
@@ -929,8 +935,8 @@ def test_a_crowns_edge_linked_after_the_drone_is_left_out_of_the_track():
     assert _off_structure_segments(mask, xyz, t, static, p.copy(hover_max_contact=1.0)) is mask
     # Deviation 146: where the reported track has been (a hover whose own voxels turned
     # static), the segment is the track's and stays; with the switch off it goes.
-    drone_path = (t_drone[::2], drone[::2].astype(np.float64))
-    by_edge = (np.array([7.0]), np.array([[6.5, 2.0, 6.0]]))
+    drone_path = _path(t_drone[::2], drone[::2].astype(np.float64))
+    by_edge = _path(np.array([7.0]), np.array([[6.5, 2.0, 6.0]]))
     assert _off_structure_segments(mask, xyz, t, static, p, drone_path).sum() < mask.sum()
     assert _off_structure_segments(mask, xyz, t, static, p, by_edge) is mask
     blind = p.copy(stream_segment_own=False)
@@ -1033,7 +1039,8 @@ def test_a_track_hidden_for_a_moment_competes_with_the_object_that_ranks_first()
     # The reported track: the earlier piece's samples and the fragment's (reacquire_join).
     path_t = np.concatenate([np.unique(t_track), np.unique(t_frag)])
     snap = types.SimpleNamespace(
-        track_path=(path_t, along(path_t)), newest=(float(path_t[-1]), along(path_t[-1:])[0])
+        track_path=(path_t, along(path_t), np.ones(path_t.size)),
+        newest=(float(path_t[-1]), along(path_t[-1:])[0]),
     )
 
     def compete(
@@ -1054,7 +1061,7 @@ def test_a_track_hidden_for_a_moment_competes_with_the_object_that_ranks_first()
     assert compete(p.min_confidence - 0.01, 300.0, 0.1) is None  # not confident enough
     # The reported track holds no sample before the fragment: nothing to join.
     alone = types.SimpleNamespace(
-        track_path=(np.unique(t_frag), along(np.unique(t_frag))), newest=snap.newest
+        track_path=_path(np.unique(t_frag), along(np.unique(t_frag))), newest=snap.newest
     )
     assert compete(0.9, 30.0, 2.16, reported=alone) is None
     # The fragment began too long after the earlier piece for one track (reacquire_window).
@@ -1291,7 +1298,7 @@ def test_a_reported_tracks_cluster_joined_by_a_bird_keeps_the_drones_piece():
     assert _split_track(0, labels, moved, t, older, scorer, ps) is None
     # Deviation 119: also when the reported track's samples are known, half of them lie
     # before the piece begins.
-    path = types.SimpleNamespace(**{**vars(snap), "track_path": (stamps, drone)})
+    path = types.SimpleNamespace(**{**vars(snap), "track_path": _path(stamps, drone)})
     assert _split_track(0, labels, moved, t, path, scorer, ps) is None
 
 
@@ -1325,7 +1332,7 @@ def test_a_bird_at_the_start_of_a_reported_tracks_cluster_does_not_end_the_track
         newest=(float(stamps[-1]), drone[-1]),
         now=8.0,
         track_from=0.0,
-        track_path=(samples, positions),
+        track_path=_path(samples, positions),
     )
     mask = _split_track(0, labels, xyz, t, snap, scorer, ps)
     assert mask is not None and np.array_equal(mask, is_drone)
@@ -1334,11 +1341,11 @@ def test_a_bird_at_the_start_of_a_reported_tracks_cluster_does_not_end_the_track
     unknown = types.SimpleNamespace(**{**vars(snap), "track_path": None})
     assert _split_track(0, labels, xyz, t, unknown, scorer, ps) is None
     longer = np.concatenate([np.arange(-3.0, 0.0, 0.1), samples])
-    many = types.SimpleNamespace(**{**vars(snap), "track_path": (longer, positions)})
+    many = types.SimpleNamespace(**{**vars(snap), "track_path": _path(longer, positions)})
     assert _split_track(0, labels, xyz, t, many, scorer, ps) is None
 
 
-def _drone_then_bird() -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+def _drone_then_bird() -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """(xyz, t, reported): a drone at 9 m/s whose returns stop at 1.2 s, then a bird 8 m
     off its path flying back at 13 m/s until 3 s, in one cluster; ``reported`` is the
     drone's track as reported up to 2 s (the drone's samples at 0-2 s)."""
@@ -1349,7 +1356,7 @@ def _drone_then_bird() -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.nda
         [11.7 - 13.0 * (tb - 1.3), np.full_like(tb, 8.0), np.full_like(tb, 18.0)]
     )
     tr = np.round(np.arange(0.0, 2.05, 0.1), 3)
-    reported = (tr, np.column_stack([9.0 * tr, np.zeros_like(tr), np.full_like(tr, 20.0)]))
+    reported = _path(tr, np.column_stack([9.0 * tr, np.zeros_like(tr), np.full_like(tr, 20.0)]))
     return np.vstack([drone, bird]).astype(np.float32), np.r_[td, tb], reported
 
 
@@ -1372,5 +1379,63 @@ def test_a_rebuilt_track_does_not_take_another_object_where_it_was_reported():
     assert not _off_reported(times[2:], means[2:], reported, params).any()  # 1 shared
     # A cluster sharing fewer than three samples with the reported track is another
     # object chosen: it is not judged by the old track, and the bird is taken as before.
-    shifted = (reported[0] + 0.05, reported[1])
+    shifted = (reported[0] + 0.05, reported[1], reported[2])
     assert any(s.position[1] > 4.0 for s in _track_samples(mask, xyz, t, params, shifted))
+
+
+def test_past_the_reported_tracks_newest_sample_a_rebuilt_track_keeps_to_its_motion():
+    # Deviation 152 (birds 7505 of the seventy-fourth set): a bird's returns joined the
+    # drone's older ones in a cluster after the reported track's newest sample; nothing
+    # judged them, and the track became the bird's.
+    params = detector_params()
+    _, _, reported = _drone_then_bird()  # the drone at 9 m/s along x, reported to 2 s
+    # Three shared samples; one at 2.3 s on the drone's way, one at 2.4 s 6 m off it, and
+    # one 2.5 s after the reported track's newest sample (beyond link_max_gap).
+    times = np.array([0.0, 0.1, 0.2, 2.3, 2.4, 4.5])
+    means = np.array(
+        [
+            [0.0, 0.0, 20.0],
+            [0.9, 0.0, 20.0],
+            [1.8, 0.0, 20.0],
+            [20.7, 0.5, 20.0],
+            [21.6, 6.0, 20.0],
+            [40.5, 9.0, 20.0],
+        ]
+    )
+    off = _off_reported(times, means, reported, params)
+    assert list(off) == [False, False, False, False, True, False]
+    assert not _off_reported(times, means, reported, params.copy(stream_carry_gap=0.0)).any()
+    # Not judged by another object's track (one shared sample).
+    assert not _off_reported(times[2:], means[2:], reported, params).any()
+
+
+def test_a_rebuilt_track_that_ends_early_carries_the_reported_tracks_newer_samples():
+    # Deviation 152 (birds 7505): the drone's newest returns left its cluster at a
+    # re-clustering; the rebuilt track ended 1.05 s before the previous track's newer
+    # samples, too long to predict, and they were dropped.
+    from clusterfilter_ros.core.streaming import _TrackSample
+
+    def sample(t: float, y: float = 0.0) -> _TrackSample:
+        return _TrackSample(t, np.array([5.0 * t, y, 20.0]), np.zeros((3, 3), np.float32))
+
+    times = np.round(np.arange(0.0, 1.01, 0.1), 3)
+    path = [(5.0 * t, 0.0, 20.0) for t in times]
+    newer = [sample(2.05), sample(2.15), sample(2.6)]
+    det = _tracked(times, path)
+    assert det._fit(2.05) is None  # beyond max_extrapolation
+    det._carry_over([*(sample(t) for t in times), *newer])
+    assert [s.t for s in list(det._track)[-3:]] == [2.05, 2.15, 2.6]
+    # Not where the track's motion reaches, or with the switch off: dropped as before.
+    det = _tracked(times, path)
+    det._carry_over([sample(2.05, y=6.0), *newer[1:]])
+    assert det._track[-1].t == 1.0
+    det = _tracked(times, path, stream_carry_gap=0.0)
+    det._carry_over(newer)
+    assert det._track[-1].t == 1.0
+    # More than stream_carry_gap (1.5 s) after the rebuilt track's newest sample: dropped
+    # (birds' samples came 1.8-1.9 s after it, the drone's 0.5-1.3 s).
+    det = _tracked(times, path)
+    det._carry_over([sample(2.6)])
+    assert det._track[-1].t == 1.0
+    det._carry_over([sample(2.4)])
+    assert det._track[-1].t == 2.4
