@@ -2029,9 +2029,8 @@ def _off_reported(
         after = np.flatnonzero((times > rt[-1]) & (times - rt[-1] <= params.link_max_gap))
         recent = _recent_mask(rt, float(rt[-1]), params)
         ts, ps, ws = rt[recent], rp[recent], reported[2][order][recent]
-        if after.size and _spans_velocity(ts, params):
-            for i in after:
-                out[i] = not _reaches(ts, ps, ws, rt[-1], float(times[i]), means[i], params)
+        for i in after:
+            out[i] = not _motion_reaches(ts, ps, ws, float(times[i]), means[i], params)
     return out
 
 
@@ -2244,12 +2243,25 @@ def _on_own_path(kept: list[_TrackSample], sample: _TrackSample, params: ParamSe
     puts it, within ``track_gate`` plus ``link_max_accel`` x dt^2 / 2 for the time dt since
     the newest of them (deviation 60). True while their motion is unknown (spanning less
     than two frame periods)."""
-    p = params
-    last = kept[-1].t
-    ts, ps, ws = _sample_arrays(_recent_samples(kept, last, p))
-    if not _spans_velocity(ts, p):
+    ts, ps, ws = _sample_arrays(_recent_samples(kept, kept[-1].t, params))
+    return _motion_reaches(ts, ps, ws, sample.t, sample.position, params)
+
+
+def _motion_reaches(
+    ts: np.ndarray,
+    ps: np.ndarray,
+    ws: np.ndarray,
+    t: float,
+    position: np.ndarray,
+    params: ParamSet,
+) -> bool:
+    """Whether ``position`` at ``t`` lies where the straight-line motion of a track's
+    recent samples (``ts`` in time order, ``ps``, weights ``ws``) reaches from the newest
+    of them (:func:`_reaches`); True while their motion is unknown (spanning less than
+    two frame periods)."""
+    if not _spans_velocity(ts, params):
         return True
-    return _reaches(ts, ps, ws, last, sample.t, sample.position, p)
+    return _reaches(ts, ps, ws, float(ts[-1]), t, position, params)
 
 
 def _reaches(
